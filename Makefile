@@ -153,11 +153,16 @@ report: setup
 	$(BIN)/gyrogen bench-ensemble --out report
 
 ## verify-axes: rw4_pyramid with every cluster property runtime (axes too) against the Newton-Euler
-## reference at the issue's size, 10^4 states x 100 parameter sets, C and Fortran, to 1e-13
+## reference at the issue's size, 10^4 states x 100 parameter sets, C and Fortran, to 1e-13; then the
+## scenes whose gimbal axes are runtime (minutes each to derive): one CMG against the gimbal reference,
+## and a sweep with a misalignment cone on cmg4_pyramid's first gimbal
 verify-axes: setup
 	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_cluster_axes.py -k issues_size
+	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_gimbals.py \
+	  tests/test_sweep_misalign.py -k "reference and axes or pyramid_gimbal_runs"
 
-## fuzz: FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
+## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
+## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
 ## FUZZ_TOLERANCE drawn motions on which every adaptive method keeps its tolerance in each state group,
 ## C and Fortran running every method alike on FUZZ_AGREE drawn scenes of each attitude (with and
 ## without -march=native), then the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS
@@ -169,7 +174,10 @@ FUZZ_GIMBAL ?= 10000
 FUZZ_SWEEPS ?= 5000
 FUZZ_AGREE ?= 250
 FUZZ_TOLERANCE ?= 300
+FUZZ_EVENTS ?= 20
 fuzz: setup
+	GYROGEN_EVENT_DRAWS=$(FUZZ_EVENTS) GYROGEN_EVENT_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
+	  $(BIN)/python -m pytest -q -n auto tests/test_events_drawn.py
 	GYROGEN_TOLERANCE_EXAMPLES=$(FUZZ_TOLERANCE) $(BIN)/python -m pytest -q tests/test_global_error.py \
 	  -k every_method
 	GYROGEN_GIMBAL_DRAWS=$(FUZZ_GIMBAL) GYROGEN_GIMBAL_SEED=$$(od -An -N4 -tu4 /dev/urandom) \

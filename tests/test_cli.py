@@ -675,3 +675,25 @@ def test_a_crlf_description_is_held_with_lf(tmp_path: Path, cli) -> None:
     assert cli(["generate", str(path), "--no-check", "--out", str(tmp_path / "o")]).code == 0
     manifest = json.loads((tmp_path / "o" / "manifest.json").read_text())
     assert manifest["scene"]["description"] == "two\nlines"
+
+
+def test_verify_after_generate_derives_nothing_again(
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`gyrogen generate` keeps what it rendered in the build cache's
+    sources/: a verify of the scene then writes the same files and builds
+    them without deriving the scene again."""
+    from gyrogen.codegen import generate
+
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    gen, out = tmp_path / "gen", tmp_path / "v"
+    assert cli(["generate", "torque_free", "--lib", "--no-check", "--out", str(gen)]).code == 0
+    monkeypatch.setattr(generate, "_UNITS", {})  # this process's units: gone
+    monkeypatch.setattr(generate, "make_context", lambda scene: pytest.fail("derived again"))
+    code, text, err = cli(["verify", "torque_free", "--states", "50", "--params", "2",
+                           "--out", str(out)])  # fmt: skip
+    assert code == 0, text + err
+    written = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert written == {p.name: p.read_bytes() for p in gen.iterdir() if p.name in written}
+    lib = {"CMakeLists.txt", "torque_free.mk", "torque_freeConfig.cmake.in", "torque_free.pc.in"}
+    assert {p.name for p in gen.iterdir()} - set(written) == lib

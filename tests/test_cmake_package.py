@@ -157,7 +157,9 @@ def test_a_hostile_description_stays_in_the_comments(prefix: Path, tmp_path: Pat
     assert scene.description == HOSTILE
     source, build, mine = tmp_path / "gyrostat", tmp_path / "build", tmp_path / "prefix"
     generate(scene, source, lib=True)
-    cmake(source, build, tmp_path, "-DBUILD_SHARED_LIBS=ON", install=mine)
+    # Debug (-O0): the comments are what is tested here; the package's Release build is prefix's
+    cmake(source, build, tmp_path, "-DBUILD_SHARED_LIBS=ON", "-DCMAKE_BUILD_TYPE=Debug",
+          install=mine)  # fmt: skip
     for where in ("lib/cmake/gyrostat/gyrostatConfig.cmake", "lib/pkgconfig/gyrostat.pc"):
         name = Path(where).name + ".in"
         installed = (mine / where).read_text()

@@ -169,6 +169,32 @@ def test_a_wrong_event_is_one_line(events: str, message: str) -> None:
     assert len(text) < 400, text
 
 
+def test_a_multi_line_expression_is_one_line_wherever_it_is_shown() -> None:
+    """A TOML multi-line string, indented as a user would, is read with its
+    line breaks as spaces (it was refused: "unexpected indent")."""
+    scene = parse(
+        builtin_text("gyrostat") + '\n[[events]]\nname = "a"\nexpr = """u1\n    + u2\n\t- 1"""\n',
+        "multi.toml",
+    )
+    assert scene.events[0].expr == "u1 + u2 - 1"
+    assert parse_expr(scene.events[0].expr) == ("-", ("+", ("name", "u1"), ("name", "u2")),
+                                                ("num", 1.0))  # fmt: skip
+
+
+@pytest.mark.slow  # a built-in scene generated and compiled
+@pytest.mark.parametrize("method", ["dop853", "taylor"])
+def test_the_builtin_spin_up_logs_its_wheel_at_40_rad_s(tmp_path: Path, method: str) -> None:
+    """wheel_spinup declares an event: u4 passes 40 rad/s. Its motor's
+    torque gives u4' = T/J exactly, so the crossing is at 40 J/T = 30 s."""
+    scene = parse(builtin_text("wheel_spinup"), "wheel_spinup.toml")
+    generate(scene, tmp_path)
+    comp = build.build(tmp_path, "c")
+    x0, c = np.array(scene.initial_state()), comp.setup([0.02])
+    _, log, _, code = comp.integrate_events(method, x0, c, [0.0, 60.0], rtol=1e-12, atol=1e-12)
+    assert code == 0 and log.names == ["wheel_at_40_rad_s"]
+    assert abs(log.times[0] - 40 * 0.015 / 0.02) < 1e-12 * 30, log.times
+
+
 def test_the_grammar_never_evaluates_python() -> None:
     """Names are data: no attribute, call of an unknown function, lambda or
     comprehension gets through."""

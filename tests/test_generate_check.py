@@ -121,3 +121,25 @@ def test_jacobian_error_catches_a_wrong_entry(controlled) -> None:  # type: igno
     assert compare.jacobian_error(jac, f, x, p) < 1e-7
     jac[:, 5, 6] *= 1.001
     assert compare.jacobian_error(jac, f, x, p) > compare.JAC_TOLERANCE
+
+
+def test_the_pairs_of_a_function_measure_each_rows_term_sizes_once() -> None:
+    """TermSizes: a row two comparisons find suspect is measured once (f
+    evaluated at it, its nx moved states and np moved parameters: three
+    calls), and each comparison's error is what it is measured alone."""
+    seen: list[int] = []
+
+    def f(xs: np.ndarray, q: np.ndarray) -> np.ndarray:
+        seen.append(len(xs))
+        return np.column_stack([xs[:, 0] * q[0] - xs[:, 1], xs[:, 1] ** 2])
+
+    x = np.random.default_rng(3).normal(size=(40, 2))
+    p = np.array([1.5])
+    ref = f(x, p)
+    a, b = ref * (1 + 1e-13), ref * (1 - 1e-13)  # rows suspect in both pairs
+    alone = [compare.size_scaled_error(v, ref, f, x, p) for v in (a, b)]
+    seen.clear()
+    sizes = compare.TermSizes(f, x, p)
+    shared = [compare.size_scaled_error(v, ref, f, x, p, sizes) for v in (a, b)]
+    k = seen[0]  # the suspect rows: f at them, at each moved state, at each moved parameter
+    assert shared == alone and seen == [k, 2 * k, k] and k > 30

@@ -3,6 +3,7 @@ rules, the proof of their equations and the compiled code's invariants."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from gyrogen.scene import Scene, SceneError, builtin_text, parse
 from gyrogen.scene.rotors import exact_perpendicular, exact_unit
 from gyrogen.symbolic import cluster, gimbals
 
+REPO = Path(__file__).resolve().parents[1]
 GOOD = builtin_text("vscmg3")
 
 
@@ -317,9 +319,16 @@ def test_a_nan_gimbal_rate_and_a_far_gimbal_angle_at_the_start() -> None:
     assert np.abs(a[rates] - b[rates]).max() < 1e-6 * np.abs(a[rates]).max()
 
 
+AXES_AT_RUN_TIME = pytest.mark.skipif(
+    not os.environ.get("GYROGEN_VERIFY_AXES"),
+    reason="runtime gimbal axes take minutes to derive: make verify-axes",
+)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED, RUNTIME, RUNTIME_AXES],
+    "text", [builtin_text("vscmg3"), builtin_text("cmg4_pyramid"), MIXED, RUNTIME,
+             pytest.param(RUNTIME_AXES, marks=AXES_AT_RUN_TIME)],
     ids=["vscmg3", "cmg4_pyramid", "mixed", "runtime", "runtime axes"],
 )  # fmt: skip
 def test_cmg_scenes_match_the_gimbal_reference(text: str, tmp_path: Path) -> None:
@@ -344,3 +353,28 @@ def test_ops_splits_a_cmg_scene_and_refuses_one_without_gimbals(cli) -> None:
     assert 30 <= ops["(solve)"] <= 50  # 6 cofactors, a determinant, 1/det, three rows
     code, out, err = cli(["ops", "rw3_orthogonal"])
     assert (code, out) == (1, "") and "rw3_orthogonal: no rotor on a gimbal" in err
+
+
+def test_the_header_says_a_gimbals_spin_axis_is_the_one_at_gimbal_angle_0() -> None:
+    """The rotor lines and p[]'s g1_k..g3_k of a rotor on a gimbal: the spin
+    axis at gimbal angle 0, turned about the gimbal axis (a fixed rotor's
+    keep their words)."""
+    from gyrogen.codegen.context import SceneContext
+
+    header = (REPO / "generated" / "cmg4_pyramid" / "cmg4_pyramid.h").read_text()
+    assert "Rotor B1 on gimbal G1: spin axis g1 = (0, 1, 0) in A at gimbal angle 0," in header
+    assert "turned by gam1 about the gimbal axis g_g1 = (0.816541, 0, 0.577288) in A" in header
+    scene = parse(RUNTIME_AXES, "r.toml")
+    doc = SceneContext(scene, None, None).rotor_doc  # type: ignore[arg-type]  # reads the scene
+    assert doc[0] == ("Rotor B1 on gimbal G1: spin axis g1 = (p[g1_1], p[g2_1], p[g3_1]) made "
+                      "perpendicular to g_g1, normalized in A at gimbal angle 0,")  # fmt: skip
+    assert doc[1] == "  turned by gam1 about the gimbal axis g_g1 = (p[gg1_1], p[gg2_1], " \
+        "p[gg3_1]) normalized in A"  # fmt: skip
+    assert scene.unit_and_doc("g2_1") == (
+        "-", 'spin axis g_s0 of rotor B1 at gimbal angle 0 (g1 turns with gam1), a2 component '
+        '(axis = "runtime")')  # fmt: skip
+    assert parse(GOOD, "v.toml").unit_and_doc("T_1")[1].endswith("(minus on gimbal G1)")
+    fixed = parse(builtin_text("rw4_hardware"), "rw.toml")
+    assert (
+        fixed.unit_and_doc("g2_1")[1] == 'spin axis g1 of rotor B1, a2 component (axis = "runtime")'
+    )

@@ -172,7 +172,8 @@ def pattern_matrix(entries: list[sm.Expr], n: int, rng: np.random.Generator) -> 
 def test_generated_lu_solves_an_augmented_system(tmp_path: Path) -> None:
     """The variational unit's LU (x, then Phi's entries, which read x: the
     coupling below x's rows) solves random systems of its Jacobian's pattern
-    with rows exchanged in x's blocks and in Phi's, as numpy does."""
+    with rows exchanged in x's blocks and in Phi's, as numpy does; the
+    complex matrices real in the coupling, as (a + i b) I - J is."""
     text = builtin_text("gyrostat") + '\n[sensitivities]\nwrt = ["state"]\n'
     unit = generate(parse(text, "gyrostat.toml"), tmp_path / "src").variational
     assert unit is not None and unit.optimized.jacobian is not None
@@ -183,9 +184,15 @@ def test_generated_lu_solves_an_augmented_system(tmp_path: Path) -> None:
     src = tmp_path / "src"
     subprocess.run(["gcc", "-std=c99", "-O2", "-I", str(src), "-o", str(exe), str(harness),
                     str(src / f"{unit.prefix}.c"), "-lm"], check=True)  # fmt: skip
+    blocks = unit.lu_blocks
+    assert blocks is not None and blocks.coupled
+    coupled = np.zeros((n, n), dtype=bool)
+    for r, cols in enumerate(blocks.coupled):
+        coupled[r, list(cols)] = True
     rng = np.random.default_rng(12)
     for _ in range(5):
         ar, ai = pattern_matrix(entries, n, rng), pattern_matrix(entries, n, rng)
+        ai[coupled] = 0.0
         br, bi = rng.uniform(-1.0, 1.0, (2, n))
         given = " ".join(repr(float(v)) for v in (*ar.ravel(), *ai.ravel(), *br, *bi))
         out = subprocess.run([str(exe)], input=given, capture_output=True, text=True, check=True)
@@ -193,3 +200,88 @@ def test_generated_lu_solves_an_augmented_system(tmp_path: Path) -> None:
         np.testing.assert_allclose(got[0], np.linalg.solve(ar, br), rtol=1e-9, atol=1e-9)
         want = np.linalg.solve(ar + 1j * ai, br + 1j * bi)
         np.testing.assert_allclose(got[1] + 1j * got[2], want, rtol=1e-9, atol=1e-9)
+
+
+SHIFTED = """
+#include <stdio.h>
+#include "{prefix}_ode.c"
+
+#define N {macro}_NX
+
+/* Reads J (row-major), d, dr, di and b (real, imaginary) from stdin; with
+   every entry of the iteration matrices set to a marker first (-(1 + k)),
+   prints (d I - J)^-1 b_re, ((dr + i di) I - J)^-1 b by real and imaginary
+   part, then the matrices' entries after lu_shift, lu_decompose and their
+   complex twins. */
+int main(void)
+{{
+    double J[N * N], a[N * N], ar[N * N], ai[N * N], b[N], br[N], bi[N], d, dr, di;
+    int piv1[N], piv2[N], i;
+    for (i = 0; i < N * N; ++i) if (scanf("%lf", &J[i]) != 1) return 2;
+    if (scanf("%lf %lf %lf", &d, &dr, &di) != 3) return 2;
+    for (i = 0; i < N; ++i) if (scanf("%lf", &br[i]) != 1) return 2;
+    for (i = 0; i < N; ++i) if (scanf("%lf", &bi[i]) != 1) return 2;
+    for (i = 0; i < N * N; ++i) a[i] = ar[i] = ai[i] = -(1.0 + i);
+    for (i = 0; i < N; ++i) b[i] = br[i];
+    lu_shift(J, d, a);
+    lu_shift_complex(J, dr, di, ar, ai);
+    if (lu_decompose(a, piv1) || lu_decompose_complex(ar, ai, piv2)) return 3;
+    lu_solve(a, piv1, b);
+    lu_solve_complex(ar, ai, piv2, br, bi);
+    for (i = 0; i < N; ++i) printf("%.17g\\n", b[i]);
+    for (i = 0; i < N; ++i) printf("%.17g\\n", br[i]);
+    for (i = 0; i < N; ++i) printf("%.17g\\n", bi[i]);
+    for (i = 0; i < N * N; ++i) printf("%.17g %.17g %.17g\\n", a[i], ar[i], ai[i]);
+    return 0;
+}}
+"""
+
+
+def shifted_solves(prefix: str, src: Path, entries: list[sm.Expr], blocks: Blocks,
+                   tmp_path: Path) -> None:  # fmt: skip
+    """lu_shift and lu_decompose (real and complex) of random J of the
+    pattern, d I - J nearly singular on the diagonal (rows exchanged), solve
+    as numpy does, and leave every entry outside Blocks.stored as it was."""
+    n = len(blocks.end)
+    harness, exe = tmp_path / "shifted.c", tmp_path / "shifted"
+    harness.write_text(SHIFTED.format(prefix=prefix, macro=prefix.upper()))
+    subprocess.run(["gcc", "-std=c99", "-O2", "-I", str(src), "-o", str(exe), str(harness),
+                    str(src / f"{prefix}.c"), "-lm"], check=True)  # fmt: skip
+    stored = np.zeros((n, n), dtype=bool)
+    for r, cols in enumerate(blocks.stored):
+        stored[r, cols] = True
+    marker = -(1.0 + np.arange(n * n)).reshape(n, n)
+    rng = np.random.default_rng(13)
+    for _ in range(3):
+        jac = pattern_matrix(entries, n, rng)
+        d, dr, di = 2.0, 1.5, 0.7
+        jac[np.diag_indices(n)] += np.array([d, dr])[rng.integers(0, 2, n)]
+        br, bi = rng.uniform(-1.0, 1.0, (2, n))
+        given = " ".join(repr(float(v)) for v in (*jac.ravel(), d, dr, di, *br, *bi))
+        out = subprocess.run([str(exe)], input=given, capture_output=True, text=True, check=True)
+        values = np.array(out.stdout.split(), dtype=float)
+        got, mats = values[: 3 * n].reshape(3, -1), values[3 * n :].reshape(n, n, 3)
+        eye = np.eye(n)
+        np.testing.assert_allclose(got[0], np.linalg.solve(d * eye - jac, br), rtol=1e-9,
+                                   atol=1e-9)  # fmt: skip
+        want = np.linalg.solve((dr + 1j * di) * eye - jac, br + 1j * bi)
+        np.testing.assert_allclose(got[1] + 1j * got[2], want, rtol=1e-9, atol=1e-9)
+        for k in range(3):
+            assert np.array_equal(mats[:, :, k][~stored], marker[~stored]), k
+
+
+@pytest.mark.slow
+def test_generated_lu_shift_touches_only_stored_entries(tmp_path: Path) -> None:
+    """The checked-in stiff_wheel's iteration matrices and the variational
+    unit's (x, then Phi's entries coupled to it) are built and factored
+    where Blocks.stored says, the rest of the arrays never read or written."""
+    scene = load("stiff_wheel")
+    blocks, jac = make_context(scene).lu_blocks, make_context(scene).optimized.jacobian
+    assert blocks is not None and jac is not None
+    src = Path(__file__).resolve().parent.parent / "generated" / "stiff_wheel"
+    shifted_solves("stiff_wheel", src, list(jac.outputs), blocks, tmp_path)
+    text = builtin_text("gyrostat") + '\n[sensitivities]\nwrt = ["state"]\n'
+    unit = generate(parse(text, "gyrostat.toml"), tmp_path / "src").variational
+    assert unit is not None and unit.optimized.jacobian is not None and unit.lu_blocks
+    shifted_solves(unit.prefix, tmp_path / "src", list(unit.optimized.jacobian.outputs),
+                   unit.lu_blocks, tmp_path)  # fmt: skip

@@ -7,7 +7,7 @@ import io
 import json
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -16,19 +16,11 @@ import pytest
 from ctrl_c import interrupted
 from matplotlib.image import imread
 
-from gyrogen.analysis.simulate import plots
+from gyrogen.analysis.simulate import plots, trajectory
 from gyrogen.analysis.simulate.engine import check_solution
 from gyrogen.analysis.simulate.files import COLUMNS
 from gyrogen.analysis.simulate.result import Settings
-from gyrogen.analysis.simulate.trajectory import (
-    QUAD_NODES,
-    Again,
-    Trajectory,
-    from_samples,
-    output_grid,
-    running_integrals,
-    sample_times,
-)
+from gyrogen.analysis.simulate.trajectory import Trajectory, output_grid, running_integrals
 from gyrogen.errors import GyrogenError
 from gyrogen.oracle import reference, scene_view
 from gyrogen.scene import builtin_names, builtin_text, load
@@ -407,23 +399,21 @@ def test_a_spent_budget_suggests_what_the_build_offers() -> None:
     assert "error norm" not in instead("taylor", ["taylor", "rk4"])
 
 
-def test_sample_times_do_not_overflow_near_dbl_max() -> None:
-    """The quadrature nodes of an interval ending near DBL_MAX are finite
-    (0.5 (a + b) overflowed with a RuntimeWarning), and the same bits as
-    before everywhere else; so is the grid (t_end + dt/2 overflowed)."""
+def test_quadrature_and_grid_do_not_overflow_near_dbl_max() -> None:
+    """The quadrature's samples in an interval ending near DBL_MAX are finite
+    (0.5 (a + b) overflowed with a RuntimeWarning), and so is the grid
+    (t_end + dt/2 overflowed)."""
+    grid = np.array([0.0, 1e308, 1.7e308])
+    asked: list[np.ndarray] = []
+    traj = _exact(grid, lambda t: t[:, None], asked)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        far = sample_times(np.array([0.0, 1e308, 1.7e308]))
+        got = running_integrals(traj, lambda t, x: np.zeros_like(x), np.array([1.0]))
         ends = [output_grid(t, dt) for t, dt in ((1.79e308, 1.79e308), (1.797e308, 1.1e308))]
-    assert np.all(np.isfinite(far)) and np.all(np.diff(far) > 0)
+    assert np.all(got.values == 0.0) and len(asked) == 1
+    assert np.all(np.isfinite(asked[0])) and np.all((asked[0] >= 0) & (asked[0] <= 1.7e308))
     for grid, t_end in zip(ends, (1.79e308, 1.797e308), strict=True):  # arange's ValueError
         assert grid[0] == 0.0 and grid[-1] == t_end and np.all(np.diff(grid) > 0)
-    grid = output_grid(20.0, 0.05)
-    a, b = grid[:-1, None], grid[1:, None]
-    before = 0.5 * (a + b) + 0.5 * (b - a) * np.polynomial.legendre.leggauss(QUAD_NODES)[0]
-    assert np.array_equal(
-        sample_times(grid).reshape(-1)[:-1].reshape(len(grid) - 1, -1)[:, 1:], before
-    )
 
 
 def test_failed_or_non_finite_solution_is_one_line() -> None:
@@ -540,100 +530,136 @@ def test_a_cluster_is_plotted_wheel_by_wheel(tmp_path: Path) -> None:
     assert imread(tmp_path / "o" / "trajectory.png").shape[:2] == plots.PIXELS
 
 
-def _layer(lam: float) -> tuple[Trajectory, Callable[[np.ndarray, np.ndarray], np.ndarray]]:
-    """x' = -lam x from x(0) = 1 on the grid 0, 0.01, .., 1 (its nodes
-    exact), with its exact states again from any point; the rate: x."""
+def _exact(
+    grid: np.ndarray, f: Callable[[np.ndarray], np.ndarray], asked: list | None = None
+) -> Trajectory:
+    """A trajectory whose states at any times t are f(t) (m, nx), known to
+    1e-14, one step an interval; each sampling's times appended to asked."""
+
+    def sample(t: np.ndarray) -> np.ndarray:
+        if asked is not None:
+            asked.append(t)
+        return f(np.asarray(t))
+
+    return Trajectory(grid, f(grid), 0, 0.0, sample, (1e-14, 1e-14), (grid, np.diff(grid)))
+
+
+def _rate(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return x[:, :1]
+
+
+def test_the_quadrature_finds_a_transient_at_a_pieces_edge() -> None:
+    """A layer of width 1e-5 s at the start of a 0.01 s interval
+    (stiff_wheel's wheel locking on): the Gauss nodes see none of it (one
+    pass: int_0^1 e^(-1e5 t) dt = 1e-5, found 0); Gauss-Lobatto's ends see
+    it, and the pieces cut there find it to 1e-12 of the scale. A smooth
+    rate takes one pass."""
     grid = output_grid(1.0, 0.01)
-    samples = sample_times(grid)
-    exact = np.exp(-lam * samples)[:, None]
-
-    def states(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray:
-        return xa[None, :] * np.exp(-lam * (times - a))[:, None]
-
-    again = Again(states, (1e-14, 1e-14), (1e-15, 1e-15))
-    return from_samples(grid, samples, exact, 0, 0.0, again), lambda t, x: x[:, :1]
-
-
-def test_the_quadrature_bisects_a_transient_between_its_nodes() -> None:
-    """A layer of width 1e-5 s at the start of a 0.01 s interval (stiff_wheel's
-    wheel locking on): the nodes see none of it, the sum missed all of it
-    (int_0^1 e^(-1e5 t) dt = 1e-5, found 0). Simpson's rule sees it at the
-    interval's start; the bisection finds it to 1e-12 of the scale."""
-    traj, rate = _layer(1e5)
-    exact = (1.0 - np.exp(-1e5 * traj.t)) / 1e5
-    blind = running_integrals(replace(traj, again=None), rate, np.array([1e-5])).values[:, 0]
-    assert abs(blind[-1] - exact[-1]) > 0.99 * exact[-1]
-    found = running_integrals(traj, rate, np.array([1e-5])).values[:, 0]
-    assert np.max(np.abs(found - exact)) <= 1e-12 * 1e-5
-    smooth, rate = _layer(1.0)  # smooth: Simpson's rule is off by 3e-14 a piece, once bisected
-    calls: list[tuple] = []
-    counted = replace(smooth.again, states=lambda *a: calls.append(a) or smooth.again.states(*a))
-    got = running_integrals(replace(smooth, again=counted), rate, np.array([1.0])).values[:, 0]
-    assert np.max(np.abs(got - (1.0 - np.exp(-smooth.t)))) <= 1e-15 and len(calls) <= 100
+    layer = _exact(grid, lambda t: np.exp(-1e5 * t)[:, None])
+    exact = (1.0 - np.exp(-1e5 * grid)) / 1e5
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(trajectory, "MAX_PASSES", 0)
+        blind = running_integrals(layer, _rate, np.array([1e-5]))
+    assert abs(blind.values[-1, 0] - exact[-1]) > 0.99 * exact[-1] and blind.unresolved
+    found = running_integrals(layer, _rate, np.array([1e-5]))
+    assert np.max(np.abs(found.values[:, 0] - exact)) <= 1e-12 * 1e-5 and not found.unresolved
+    asked: list[np.ndarray] = []
+    smooth = _exact(grid, lambda t: np.exp(-t)[:, None], asked)
+    got = running_integrals(smooth, _rate, np.array([1.0])).values[:, 0]
+    assert np.max(np.abs(got - (1.0 - np.exp(-grid)))) <= 1e-15 and len(asked) == 1
 
 
-def test_the_quadrature_bisects_down_to_a_kink() -> None:
-    """|t - k| (a clamp's kink at k, between the nodes): a bisection whose
-    halves happened to shrink Simpson's difference less than 1.5x stopped
-    there, 8e-5 off for one k in five; a stall must now repeat to stop it."""
-    grid = output_grid(1.0, 0.1)
-    samples = sample_times(grid)
-    again = Again(
-        lambda a, xa, times: xa[None, :] + (times - a)[:, None], (1e-14,) * 2, (1e-15,) * 2
-    )
-    traj = from_samples(grid, samples, samples[:, None].copy(), 0, 0.0, again)
+def test_the_quadrature_cuts_down_to_a_kink() -> None:
+    """|t - k| (a clamp's kink at k, anywhere in an interval): the rules
+    differ until the piece holding it is short; the integral to 1e-14."""
+    traj = _exact(output_grid(1.0, 0.1), lambda t: t[:, None])
     for k in np.random.default_rng(1).uniform(0.05, 0.95, 50):
-        got = running_integrals(
-            traj, lambda t, x, k=k: np.abs(x[:, :1] - k), np.array([1.0])
-        ).values
-        assert abs(got[-1, 0] - (k**2 + (1 - k) ** 2) / 2) <= 1e-14, k
+        got = running_integrals(traj, lambda t, x, k=k: np.abs(x[:, :1] - k), np.array([1.0]))
+        assert abs(got.values[-1, 0] - (k**2 + (1 - k) ** 2) / 2) <= 1e-14, k
+        assert not got.unresolved
 
 
-def _spinning(w: float, steps: int) -> Trajectory:
-    """x = (cos w t, sin w t) on the grid 0, 1, .., 10 (its nodes exact, said
-    known to 1e-6), with its exact states again from any point, and an
-    integrator's steps an interval."""
-    grid = output_grid(10.0, 1.0)
-    samples = sample_times(grid)
-
-    def states(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray:
-        c, s = np.cos(w * (times - a)), np.sin(w * (times - a))
-        return np.column_stack([xa[0] * c - xa[1] * s, xa[0] * s + xa[1] * c])
-
-    exact = np.column_stack([np.cos(w * samples), np.sin(w * samples)])
-    again = Again(states, (1e-6, 1e-6), (1e-6, 1e-6))
-    return from_samples(grid, samples, exact, 0, 0.0, again, np.full(len(grid) - 1, steps))
-
-
-def test_the_quadrature_cuts_an_interval_into_the_integrators_steps() -> None:
-    """cos^2(w t) with 22.3 periods an output interval (stiff_wheel's nutation
-    at --dt 1000): the nodes and Simpson's rule alias alike and agreed, the
-    integral 0.15 off in 5 (stiff_wheel's energy balance: 6.5e-4 at --dt
-    1000, 5.7e-9 at 10; bisecting here spent all 10^5 bisections, 10 s, and
-    still missed). The interval is now cut into the integrator's steps."""
+def _spinning(t: np.ndarray) -> np.ndarray:
+    """x = (cos w t, sin w t), 22.3 periods a second."""
     w = 2 * np.pi * 22.3
-    rate = lambda t, x: x[:, :1] ** 2  # noqa: E731
-    traj = _spinning(w, 1000)
+    return np.column_stack([np.cos(w * t), np.sin(w * t)])
+
+
+def test_the_quadrature_cuts_an_oscillation_it_aliases() -> None:
+    """cos^2(w t) with 22.3 periods an output interval (stiff_wheel's
+    nutation at --dt 1000): one Gauss rule an interval aliases it, 0.05
+    off; Gauss-Lobatto aliases it otherwise, and the pieces cut where they
+    disagree find it to 1e-12."""
+    w = 2 * np.pi * 22.3
+    traj = _exact(output_grid(10.0, 1.0), _spinning)
     exact = traj.t / 2 + np.sin(2 * w * traj.t) / (4 * w)
-    blind = running_integrals(replace(traj, again=None), rate, np.array([1.0]))
-    assert np.max(np.abs(blind.values[:, 0] - exact)) > 0.05
+    rate = lambda t, x: x[:, :1] ** 2  # noqa: E731
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(trajectory, "MAX_PASSES", 0)
+        blind = running_integrals(traj, rate, np.array([1.0]))
+    assert np.max(np.abs(blind.values[:, 0] - exact)) > 0.04
     got = running_integrals(traj, rate, np.array([1.0]))
-    assert np.max(np.abs(got.values[:, 0] - exact)) <= 1e-9 and not got.unresolved
+    assert np.max(np.abs(got.values[:, 0] - exact)) <= 1e-12 and not got.unresolved
+
+
+def test_the_quadrature_cuts_at_the_knots() -> None:
+    """A torque table's pulse of 1e-4 s inside a 0.01 s interval, between
+    its nodes (a table with points at 2.003, 2.00305 and 2.0031 s): the
+    rules both miss it, and agree. With the table's points as knots, the
+    pieces end there: exact in one pass (to the rounding of the times near
+    2 s: 4e-16 s, times the slope 1e4 N m/s, over 1e-4 s)."""
+    table = np.array([[0.0, 0.0], [2.003, 0.0], [2.00305, 0.5], [2.0031, 0.0]])
+    rate = lambda t, x: np.interp(x[:, 0], table[:, 0], table[:, 1])[:, None]  # noqa: E731
+    asked: list[np.ndarray] = []
+    traj = _exact(output_grid(4.0, 0.01), lambda t: t[:, None], asked)
+    blind = running_integrals(traj, rate, np.array([1.0]))
+    assert abs(blind.values[-1, 0]) < 1e-9 and not blind.unresolved  # 2.5e-5 missed
+    asked.clear()
+    got = running_integrals(traj, rate, np.array([1.0]), table[:, 0])
+    assert abs(got.values[-1, 0] - 2.5e-5) <= 1e-16 and len(asked) == 1  # times' rounding
 
 
 def test_the_quadrature_says_what_it_could_not_resolve(monkeypatch: pytest.MonkeyPatch) -> None:
-    """With its bisections spent it kept the nodes' sum silently (the layer's
-    integral: 0 for 1e-5); past MAX_PIECES, pieces wider than the steps."""
-    from gyrogen.analysis.simulate import trajectory
+    """With its passes spent it keeps the Gauss sums (the layer's integral:
+    0 for 1e-5) and says so; past MAX_PIECES, the pieces left uncut."""
+    layer = _exact(output_grid(1.0, 0.01), lambda t: np.exp(-1e5 * t)[:, None])
+    monkeypatch.setattr(trajectory, "MAX_PASSES", 2)
+    got = running_integrals(layer, _rate, np.array([1e-5]))
+    assert len(got.unresolved) == 1 and "pieces still disagreed after 2 passes" in got.unresolved[0]
+    monkeypatch.setattr(trajectory, "MAX_PASSES", 16)
+    monkeypatch.setattr(trajectory, "MAX_PIECES", 16)
+    traj = _exact(output_grid(10.0, 1.0), _spinning)
+    got = running_integrals(traj, lambda t, x: x[:, :1] ** 2, np.array([1.0]))
+    assert len(got.unresolved) == 1 and "left uncut past the 16 a pass" in got.unresolved[0]
 
-    traj, rate = _layer(1e5)
-    monkeypatch.setattr(trajectory, "MAX_BISECTIONS", 3)
-    got = running_integrals(traj, rate, np.array([1e-5]))
-    assert len(got.unresolved) == 1 and "the 3 bisections were spent" in got.unresolved[0]
-    monkeypatch.setattr(trajectory, "MAX_BISECTIONS", 10**5)
-    monkeypatch.setattr(trajectory, "MAX_PIECES", 100)
-    got = running_integrals(_spinning(1.0, 20), lambda t, x: x[:, :1], np.array([1.0]))
-    assert len(got.unresolved) == 1 and "took 200 steps, more than the 100" in got.unresolved[0]
+
+TABLE = (
+    "[[0.0, 0.0], [0.1234, 0.02], [1.5, 0.02], [2.003, 0.0], [2.00305, 0.5], [2.0031, 0.0], "
+    "[3.33333, -0.01], [3.33334, 0.03], [9.0, 0.0]]"
+)
+"""Kinks between the grid's points and on them (1.5, 9.0), a steep ramp
+(1e-5 s) and a pulse of 1e-4 s between the quadrature's nodes."""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["dop853", "DOP853"])
+def test_the_balances_close_on_a_torque_table(tmp_path: Path, cli, method: str) -> None:
+    """gyrostat driven by a T(t) table: the run stepped across the table's
+    points (segments of an eighth of an interval), its slope jumps and its
+    pulse between the nodes, the u4 balance 7.6e-9 and 1.4e-8 of max |u4|
+    off. Now the run stops and starts again at each point (solve_ivp too),
+    the quadrature's pieces end there, and both balances close to 1e-13."""
+    text = builtin_text("gyrostat").replace('T   = "runtime"', "").replace("T   = 0.01", "")
+    text = text.replace('torque = "constant"', f'torque = "table"\ntorque_table = {TABLE}')
+    (tmp_path / "table.toml").write_text(text)
+    argv = [str(tmp_path / "table.toml"), "--method", method, "--t-end", "4", "--no-plot"]
+    run = simulate(cli, argv, tmp_path / "out")
+    assert run.code == 0, run.err
+    summary = json.loads((run.dir / "summary.json").read_text())
+    worst = summary["invariants"]
+    assert worst["energy_balance_relative_residual"] < 1e-13, worst
+    assert worst["u4_relative_residual"] < 1e-13, worst
+    assert summary["quadrature_unresolved"] == []
 
 
 @pytest.mark.slow

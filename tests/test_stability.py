@@ -135,8 +135,8 @@ def test_check_a_scene_file(cli) -> None:
 def test_a_scene_check_balances_a_law_without_closed_form() -> None:
     """stiff_wheel (a speed controller, k/J = 1e5): check judged |H| alone,
     so it passed where simulate's balances read 1.0. Its energy balance and
-    u4 check now take simulate's quadrature (bisected across the 1e-5 s
-    transient) and hold to the bar."""
+    u4 check now take simulate's quadrature (its pieces cut down across the
+    1e-5 s transient) and hold to the bar."""
     case = cases.scene_case("stiff_wheel")
     assert case.quadrature
     comp = scene_build.compiled(scene_build.scene_sources(case.scene))
@@ -225,9 +225,10 @@ def test_cluster_saturation_clamps_then_releases_with_the_energy_balanced(
     compiled: dict[str, Compiled],
 ) -> None:
     """rw4_pyramid from w1..w3 10 rad/s off their w_ref: the clamp holds their
-    motors at the start and lets go before the end; the times it switches are
-    among the samples, so the quadrature of the clamped power keeps the
-    energy balance to rounding."""
+    motors at the start and lets go before the end; the run stops and starts
+    again at the times it switches (without them the balance read 1.7e-11),
+    and the quadrature's pieces end there, so the energy balance keeps to
+    rounding."""
     case = _quick("cluster wheel saturation")
     res = engine.run_case(case, compiled[case.scene.name])
     assert res.passed and res.trajectory is not None and res.times is not None

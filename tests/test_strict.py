@@ -14,6 +14,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from conftest import built_once
 
 from gyrogen.runtime.flags import C_STRICT, FORTRAN_STRICT
 from gyrogen.runtime.flags import C_WARNINGS as CXX_WARNINGS
@@ -126,20 +127,38 @@ def build_examples(source_dir: Path, build: Path, *overrides: str, target: str =
            *overrides, target], EXAMPLES)  # fmt: skip
 
 
-@pytest.mark.parametrize("cc", ["gcc", "clang"])
-def test_c_example_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str) -> None:
+def sanitized_examples(source_dir: Path, tmp_path_factory: pytest.TempPathFactory, cc: str) -> Path:
+    """The C example built by examples/Makefile with ASan and UBSan by cc,
+    with the default scene's library under the same flags installed in its
+    prefix/: built once per run and compiler (its rhs, one 140 kB function,
+    is the long compile), for the example and the verify harness alike."""
     sanitize = " ".join(SANITIZE)
-    build_examples(
-        source_dir,
-        tmp_path,
-        f"CC={sanitizer(cc, tmp_path)}",
-        f"CFLAGS=-std=c99 -O1 {DEBUG[cc]} {sanitize}",
-        f"LDFLAGS={sanitize}",
-        "BUILD_TYPE=Debug",  # no -O3 of Release after CFLAGS' -O1: 90 s of ASan compiles were that
-        target=str(tmp_path / "embed_c"),
-    )
-    env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1", UBSAN_OPTIONS="halt_on_error=1")
-    out = clean([str(tmp_path / "embed_c")], tmp_path, env)
+
+    def make(build: Path) -> None:
+        build.mkdir()
+        build_examples(
+            source_dir,
+            build,
+            f"CC={sanitizer(cc, build)}",
+            f"CFLAGS=-std=c99 -O1 {DEBUG[cc]} {sanitize}",
+            f"LDFLAGS={sanitize}",
+            # no -O3 of Release after CFLAGS' -O1: 90 s of ASan compiles were that
+            "BUILD_TYPE=Debug",
+            target=str(build / "embed_c"),
+        )
+
+    return built_once(tmp_path_factory, f"sanitized-{cc}", make)
+
+
+SANITIZER_ENV = {"ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "halt_on_error=1"}
+
+
+@pytest.mark.parametrize("cc", ["gcc", "clang"])
+def test_c_example_under_sanitizers(
+    source_dir: Path, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path, cc: str
+) -> None:
+    build = sanitized_examples(source_dir, tmp_path_factory, cc)
+    out = clean([str(build / "embed_c")], tmp_path, dict(os.environ, **SANITIZER_ENV))
     assert out.count("\n") == 18  # 14 states, 3 components of H, its norm
 
 
@@ -156,9 +175,12 @@ def test_examples_under_valgrind(examples_build: Path, program: str) -> None:
 
 
 @pytest.mark.parametrize("cc", ["gcc", "clang"])
-def test_verify_path_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str) -> None:
+def test_verify_path_under_sanitizers(
+    source_dir: Path, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path, cc: str
+) -> None:
     """setup, rhs and two integrators on random valid and invalid inputs,
-    built with ASan and UBSan and checked against the numpy reference."""
+    built with ASan and UBSan (the library of sanitized_examples) and
+    checked against the numpy reference."""
     import numpy as np
     from scipy.integrate import solve_ivp
 
@@ -172,14 +194,15 @@ def test_verify_path_under_sanitizers(source_dir: Path, tmp_path: Path, cc: str)
     states[:, 10] = np.clip(states[:, 10], -20, 20)  # keep the short integrations cheap
     blob = np.array([len(params), len(states)], dtype=np.int32).tobytes()
     (tmp_path / "in.bin").write_bytes(blob + params.tobytes() + states.tobytes())
+    prefix = sanitized_examples(source_dir, tmp_path_factory, cc) / "prefix"
+    (library,) = prefix.glob("lib*/libgyrostat.a")  # setup and rhs built with the sanitizers
     sanitize = [*SANITIZE, *DEBUG[cc].split(), "-O1"]
     harness = Path(__file__).parent / "harness" / "verify.c"
-    sources = [str(source_dir / n) for n in ("gyrostat.c", "gyrostat_ode.c")]
-    cc_path = sanitizer(cc, tmp_path)
-    clean([cc_path, "-std=c99", *sanitize, f"-I{source_dir}", str(harness), *sources, "-lm",
-           "-o", "verify"], tmp_path)  # fmt: skip
-    env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1", UBSAN_OPTIONS="halt_on_error=1")
-    clean([str(tmp_path / "verify"), "in.bin", "out.bin"], tmp_path, env)
+    clean([sanitizer(cc, tmp_path), "-std=c99", *sanitize, f"-I{prefix / 'include' / 'gyrostat'}",
+           str(harness), str(library), "-lm", "-o", "verify"], tmp_path)  # fmt: skip
+    clean(
+        [str(tmp_path / "verify"), "in.bin", "out.bin"], tmp_path, dict(os.environ, **SANITIZER_ENV)
+    )
     out, pos = (tmp_path / "out.bin").read_bytes(), 0
     nx = 14
     for p in params:

@@ -17,6 +17,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy import stats
+from sweep_cases import rows
 
 from gyrogen.analysis.sweep.draws import inputs
 from gyrogen.analysis.sweep.metrics import columns, pointing
@@ -258,3 +259,215 @@ def test_the_builtin_misalignment_sweep_keeps_its_hardware_within_bounds() -> No
     for name in ("I11", "I22", "I33", "I_1", "J_4"):
         ratio = inp.values[name] / NOMINAL[name]
         assert np.all(np.abs(ratio - 1.0) <= 0.02 + 1e-12), name
+
+
+# A gimbal's pair of runtime axes ([draws.misalign] gimbal_K): the gimbal
+# axis tilted within the cone, the spin axis at gimbal angle 0 turned with it.
+
+PYRAMID = load("cmg4_pyramid").rotors
+
+
+def cmg_runtime(*ks: int) -> str:
+    """cmg4_pyramid with rotors ks' spin axis and gimbal axis at run time
+    (their values the pyramid's, in simulate.parameters)."""
+    head, *tables = builtin_text("cmg4_pyramid").split("[[rotors]]")
+    given = []
+    for k in ks:
+        r = PYRAMID[k - 1]
+        assert r.gimbal is not None
+        for keys, axis in ((("g1", "g2", "g3"), r.axis), (("gg1", "gg2", "gg3"), r.gimbal.axis)):
+            assert f"axis = {list(axis)}" in tables[k - 1]
+            tables[k - 1] = tables[k - 1].replace(f"axis = {list(axis)}", 'axis = "runtime"', 1)
+            given += [f"{key}_{k} = {x!r}" for key, x in zip(keys, axis, strict=True)]
+    text = "[[rotors]]".join([head, *tables]).replace('name = "cmg4_pyramid"', 'name = "cmg_rt"')
+    return text.replace("parameters = { ", f"parameters = {{ {', '.join(given)}, ", 1)
+
+
+CMG_SWEEP = """
+scene = "cmg_rt.toml"
+t_end = {t_end}
+[draws]
+seed = 5
+count = {count}
+[draws.misalign]
+gimbal_1 = {{ angle = {{ {angle} }}, max_deg = {max_deg} }}
+"""
+
+
+def cmg_spec(tmp_path: Path, angle: str = "normal = [0.0, 0.2]", max_deg: str = "0.5",
+             count: int = 2000, scene: str | None = None, t_end: float = 1.0):  # fmt: skip
+    (tmp_path / "cmg_rt.toml").write_text(scene or cmg_runtime(1, 2, 3, 4))
+    text = CMG_SWEEP.format(angle=angle, max_deg=max_deg, count=count, t_end=t_end)
+    return parse(text, "x", "x", tmp_path)
+
+
+def pairs(values: dict[str, np.ndarray], k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each draw's gimbal axis g_g and spin axis g_s0 of rotor k."""
+    return tuple(np.stack([values[f"{key}{i}_{k}"] for i in (1, 2, 3)], axis=1)  # type: ignore[return-value]
+                 for key in ("gg", "g"))  # fmt: skip
+
+
+def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), np.sum(a * b, axis=-1))
+
+
+def test_a_gimbal_misalignment_draws_both_axes_of_the_pair(tmp_path: Path) -> None:
+    s = cmg_spec(tmp_path)
+    assert s.variables == ("gg1_1", "gg2_1", "gg3_1", "g1_1", "g2_1", "g3_1")
+    inp = inputs(s, 0, 10)
+    for name in s.variables:
+        assert np.array_equal(inp.p[:, s.scene.runtime.index(name)], inp.values[name])
+    assert np.all(inp.p[:, s.scene.runtime.index("gg1_2")] == PYRAMID[1].gimbal.axis[0])  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize(
+    ("angle", "max_deg"), [("normal = [0.0, 0.2]", 0.5), ("uniform = [-30.0, 30.0]", 30.0),
+                           ("uniform = [0.0, 90.0]", 90.0)])  # fmt: skip
+def test_a_gimbal_pair_stays_orthonormal_and_turns_rigidly_within_the_cone(
+    angle: str, max_deg: float, tmp_path: Path
+) -> None:
+    """Each drawn pair is orthonormal; the gimbal axis is within the cone; the
+    pair is the nominal one turned by one rotation about an axis
+    perpendicular to the nominal gimbal axis (no twist about it: that would
+    be a gimbal angle), by the gimbal axis's tilt, so the spin axis moves no
+    farther than the gimbal axis."""
+    s = cmg_spec(tmp_path, angle=angle, max_deg=str(max_deg))
+    g_g, g_s = pairs(inputs(s, 0, 2000).values, 1)
+    assert np.max(np.abs(np.linalg.norm(g_g, axis=1) - 1.0)) < 4e-16
+    assert np.max(np.abs(np.linalg.norm(g_s, axis=1) - 1.0)) < 4e-16
+    assert np.max(np.abs(np.sum(g_g * g_s, axis=1))) < 4e-16
+    r = PYRAMID[0]
+    g0, s0 = (np.array(v) for v in (r.gimbal.axis, r.axis))  # type: ignore[union-attr]
+    tilt = angle_between(g_g, g0)
+    assert 0.9 * max_deg < np.degrees(tilt.max()) <= max_deg * (1 + 1e-12)
+    before = np.stack([g0, s0, np.cross(g0, s0)], axis=1)
+    after = np.stack([g_g, g_s, np.cross(g_g, g_s)], axis=2)
+    turn = after @ before.T  # the rotation taking the nominal pair to each drawn one
+    assert np.allclose(turn @ turn.transpose(0, 2, 1), np.eye(3), rtol=0, atol=1e-15)
+    size = 2.0 * np.arcsin(np.linalg.norm(turn - np.eye(3), axis=(1, 2)) / np.sqrt(8.0))
+    assert np.max(np.abs(size - tilt)) < 1e-14
+    assert np.all(angle_between(g_s, s0) <= tilt + 1e-14)
+
+
+def test_drawn_pairs_pass_setups_axis_checks(tmp_path: Path) -> None:
+    """setup's code 8 (each axis of unit length) and 10 (perpendicular) on
+    every drawn pair, tilted up to 30 degrees; the spin axis tilted alone
+    by as little as 0.06 degrees fails code 10 (the refusal gimbal_K
+    avoids, and axis_K on a gimbal is refused for)."""
+    from gyrogen.setup_checks import cluster_checks, failure
+
+    s = cmg_spec(tmp_path, angle="uniform = [-30.0, 30.0]", max_deg="30.0")
+    checks = [c for c in cluster_checks(dict.fromkeys(s.variables, "runtime"), 1)
+              if c.code in (8, 10)]  # fmt: skip
+    assert [c.code for c in checks] == [8, 8, 10]
+    values = inputs(s, 0, 200).values
+    for i in range(200):
+        row = {name: float(v[i]) for name, v in values.items()}
+        assert [failure(c, row) for c in checks] == [None] * 3
+        alone = {**row, **{f"gg{j}_1": PYRAMID[0].gimbal.axis[j - 1] for j in (1, 2, 3)}}  # type: ignore[union-attr]
+        g_g, g_s = pairs({n: np.array([v]) for n, v in alone.items()}, 1)
+        if np.degrees(angle_between(g_g, g_s)[0]) < 89.94:
+            assert failure(checks[2], alone) is not None
+
+
+def test_gimbal_draws_depend_on_seed_and_index_alone(tmp_path: Path) -> None:
+    s = cmg_spec(tmp_path, count=500)
+    whole = inputs(s, 0, 500)
+    part = inputs(s, 123, 200)
+    for name in s.variables:
+        assert np.array_equal(part.values[name], whole.values[name][123:200])
+
+
+def test_a_nominal_pair_off_perpendicular_within_the_slack_is_made_orthonormal(
+    tmp_path: Path,
+) -> None:
+    """Nominal axes within setup's slacks (a length off by 5e-4, the spin
+    axis 5e-4 off perpendicular) are drawn as setup would make them: g_g
+    normalized, g_s0 made perpendicular to it."""
+    s = cmg_spec(tmp_path, scene=cmg_runtime(1).replace("g3_1 = 0.0", "g3_1 = 0.0005")
+                 .replace("gg1_1 = 0.8165408118857462", "gg1_1 = 0.8170"))  # fmt: skip
+    g_g, g_s = pairs(inputs(s, 0, 500).values, 1)
+    assert np.max(np.abs(np.linalg.norm(g_s, axis=1) - 1.0)) < 4e-16
+    assert np.max(np.abs(np.sum(g_g * g_s, axis=1))) < 4e-16
+
+
+GIMBAL_BAD = [
+    ("spin axis alone", "gimbal_1 =", "axis_1 =", cmg_runtime(1),
+     "draws.misalign.axis_1: rotor 1 is on a gimbal, whose spin axis turns with its gimbal "
+     "axis (tilted alone setup refuses it: code 10): misalign the pair with gimbal_1"),
+    ("no gimbal", "gimbal_1 =", "gimbal_1 =", builtin_text("rw4_hardware").replace(
+        'name = "rw4_hardware"', 'name = "cmg_rt"'),
+     "draws.misalign.gimbal_1: rotor 1 has no gimbal: misalign its axis with axis_1"),
+    ("folded gimbal axis", "gimbal_1 =", "gimbal_1 =", cmg_runtime(1).replace(
+        'axis = "runtime"\ninertia', "axis = [0.8165408118857462, 0.0, 0.5772877120855479]\n"
+        "inertia", 1).replace("gg1_1 = 0.8165408118857462, gg2_1 = 0.0, "
+                              "gg3_1 = 0.5772877120855479, ", ""),
+     "draws.misalign.gimbal_1: rotor 1's gimbal axis is folded into the code: make axis and "
+     'gimbal.axis "runtime" in the scene to misalign the pair'),
+    ("folded pair", "gimbal_1 =", "gimbal_1 =", builtin_text("cmg4_pyramid").replace(
+        'name = "cmg4_pyramid"', 'name = "cmg_rt"'),
+     "draws.misalign.gimbal_1: rotor 1's spin axis and gimbal axis are folded into the code"),
+    ("no such gimbal", "gimbal_1 =", "gimbal_5 =", cmg_runtime(1),
+     "draws.misalign.gimbal_5: not a rotor axis of scene cmg_rt (gimbal_1..gimbal_4)"),
+    ("also drawn", "[draws.misalign]", "gg2_1 = { normal = [0.0, 0.01] }\n[draws.misalign]",
+     cmg_runtime(1), "draws.misalign.gimbal_1: gg2_1 also on the grid or drawn"),
+    ("spin also drawn", "[draws.misalign]", "g3_1 = { normal = [0.0, 0.01] }\n[draws.misalign]",
+     cmg_runtime(1), "draws.misalign.gimbal_1: g3_1 also on the grid or drawn"),
+    ("not perpendicular", "[draws]", "[parameters]\ng3_1 = 0.01\n[draws]", cmg_runtime(1),
+     "draws.misalign.gimbal_1: nominal gg1_1..gg3_1: not perpendicular to the spin axis "
+     "(|g_s0 . g_g| = 0.00577"),
+    ("nominal length", "[draws]", "[parameters]\ngg3_1 = 0.6\n[draws]", cmg_runtime(1),
+     "draws.misalign.gimbal_1: nominal gg1_1..gg3_1: length 1.01"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("case", "old", "new", "scene", "message"), GIMBAL_BAD,
+                         ids=[b[0] for b in GIMBAL_BAD])  # fmt: skip
+def test_bad_gimbal_misalignment_is_one_line_exit_2_nothing_written(
+    case: str, old: str, new: str, scene: str, message: str, tmp_path: Path, cli
+) -> None:
+    (tmp_path / "cmg_rt.toml").write_text(scene)
+    text = CMG_SWEEP.format(angle="normal = [0.0, 0.2]", max_deg=0.5, count=10, t_end=1.0)
+    assert old in text
+    path = tmp_path / "bad.toml"
+    path.write_text(text.replace(old, new))
+    out = tmp_path / "out"
+    code, stdout, err = cli(["sweep", str(path), "--out", str(out)])
+    assert code == 2, (case, err)
+    assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: "), err
+    assert message in err, err
+    assert not out.exists() and stdout == ""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not os.environ.get("GYROGEN_VERIFY_AXES"),
+    reason="runtime gimbal axes take minutes to derive: make verify-axes",
+)
+def test_a_sweep_with_a_cone_on_a_pyramid_gimbal_runs(
+    tmp_path: Path, cache_dir: Path, monkeypatch: pytest.MonkeyPatch, cli
+) -> None:
+    """cmg4_pyramid with its first gimbal's axes at run time (minutes to
+    derive), its pair tilted within 2 degrees: every row set up and run
+    (the spin axis tilted alone by 0.5 degrees: setup's code 10)."""
+    from gyrogen.runtime.scene_build import compiled, scene_sources
+
+    monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
+    s = cmg_spec(tmp_path, angle="uniform = [-2.0, 2.0]", max_deg="2.0", count=6, t_end=0.5,
+                 scene=cmg_runtime(1))  # fmt: skip
+    path = tmp_path / "cone.toml"
+    path.write_text(CMG_SWEEP.format(angle="uniform = [-2.0, 2.0]", max_deg=2, count=6, t_end=0.5))
+    code, _, err = cli(["sweep", str(path), "--out", str(tmp_path / "out"), "--workers", "1",
+                        "--quiet", "--no-plots"])  # fmt: skip
+    assert code == 0, err
+    got = rows(tmp_path / "out").sort_values("sample")
+    assert list(got["setup_code"]) == [0] * 6 and list(got["code"]) == [0] * 6
+    want = inputs(s, 0, 6).values
+    for name in s.variables:
+        np.testing.assert_array_equal(got[name].to_numpy(), want[name])
+    assert np.all(np.isfinite(got[[f"final_{n}" for n in s.scene.states]].to_numpy()))
+    comp = compiled(scene_sources(s.scene))
+    p = inputs(s, 0, 1).p[0]
+    g_s = [s.scene.runtime.index(f"g{i}_1") for i in (1, 2, 3)]
+    p[g_s] = [0.0, np.cos(np.radians(0.5)), np.sin(np.radians(0.5))]  # off the gimbal's plane
+    assert comp.setup_code(p)[0] == 10

@@ -160,7 +160,7 @@ def scenes() -> str:
 
 def names() -> str:
     from gyrogen.abi import CONTROLLER_PARAMETERS, PARAMETERS, STATES, unit_and_doc
-    from gyrogen.abi_rotors import CLUSTER_CARRIER, ROTOR_KEYS
+    from gyrogen.abi_rotors import CLUSTER_CARRIER, ON_GIMBAL, ROTOR_KEYS
 
     def table(keys: typing.Iterable[str]) -> list[str]:
         rows = ["| name | unit | meaning |", "|---|---|---|"]
@@ -187,6 +187,14 @@ def names() -> str:
         "|---|---|---|",
     ]
     out += [f"| `{k}` | {u} | {d.format(k='k')} |" for k, (u, d) in ROTOR_KEYS.items()]
+    out += [
+        "",
+        "On a rotor on a gimbal these keys mean:",
+        "",
+        "| key | unit | meaning |",
+        "|---|---|---|",
+    ]
+    out += [f"| `{k}` | {u} | {d.format(k='k')} |" for k, (u, d) in ON_GIMBAL.items()]
     return "\n".join(out)  # fmt: skip
 
 

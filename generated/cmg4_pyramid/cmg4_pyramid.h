@@ -57,18 +57,38 @@ extern "C" {
  * Folded into the code:
  *   m_a = 50.0, I11 = 2.5, I22 = 2.2, I33 = 1.8
  *
- * Rotor B1: axis g1 = (0, 1, 0) in A, B1* at (0.12, 0, -0.08) m from A*;
+ * Rotor B1 on gimbal G1: spin axis g1 = (0, 1, 0) in A at gimbal angle 0,
+ *   turned by gam1 about the gimbal axis g_g1 = (0.816541, 0, 0.577288) in A
+ *   (g1(gam1) = cos(gam1) g1(0) + sin(gam1) g_g1 x g1(0));
+ *   B1* at (0.12, 0, -0.08) m from A*;
  *   speed controller T = -k (w1 - g1.w_A - w_ref), k = 0.002, w_ref = 1047.2;
- *   friction b = 1e-06 N m s.
- * Rotor B2: axis g2 = (-1, 0, 0) in A, B2* at (0, 0.12, -0.08) m from A*;
+ *   friction b = 1e-06 N m s;
+ *   gimbal G1: rate servo u_g = -k (gd1 - rate_ref), k = 0.004, rate_ref = p[rate_ref_1],
+ *     |u_g| clamped to 0.01 N m.
+ * Rotor B2 on gimbal G2: spin axis g2 = (-1, 0, 0) in A at gimbal angle 0,
+ *   turned by gam2 about the gimbal axis g_g2 = (0, 0.816541, 0.577288) in A
+ *   (g2(gam2) = cos(gam2) g2(0) + sin(gam2) g_g2 x g2(0));
+ *   B2* at (0, 0.12, -0.08) m from A*;
  *   speed controller T = -k (w2 - g2.w_A - w_ref), k = 0.002, w_ref = 1047.2;
- *   friction b = 1e-06 N m s.
- * Rotor B3: axis g3 = (0, -1, 0) in A, B3* at (-0.12, 0, -0.08) m from A*;
+ *   friction b = 1e-06 N m s;
+ *   gimbal G2: rate servo u_g = -k (gd2 - rate_ref), k = 0.004, rate_ref = p[rate_ref_2],
+ *     |u_g| clamped to 0.01 N m.
+ * Rotor B3 on gimbal G3: spin axis g3 = (0, -1, 0) in A at gimbal angle 0,
+ *   turned by gam3 about the gimbal axis g_g3 = (-0.816541, 0, 0.577288) in A
+ *   (g3(gam3) = cos(gam3) g3(0) + sin(gam3) g_g3 x g3(0));
+ *   B3* at (-0.12, 0, -0.08) m from A*;
  *   speed controller T = -k (w3 - g3.w_A - w_ref), k = 0.002, w_ref = 1047.2;
- *   friction b = 1e-06 N m s.
- * Rotor B4: axis g4 = (1, 0, 0) in A, B4* at (0, -0.12, -0.08) m from A*;
+ *   friction b = 1e-06 N m s;
+ *   gimbal G3: rate servo u_g = -k (gd3 - rate_ref), k = 0.004, rate_ref = p[rate_ref_3],
+ *     |u_g| clamped to 0.01 N m.
+ * Rotor B4 on gimbal G4: spin axis g4 = (1, 0, 0) in A at gimbal angle 0,
+ *   turned by gam4 about the gimbal axis g_g4 = (0, -0.816541, 0.577288) in A
+ *   (g4(gam4) = cos(gam4) g4(0) + sin(gam4) g_g4 x g4(0));
+ *   B4* at (0, -0.12, -0.08) m from A*;
  *   speed controller T = -k (w4 - g4.w_A - w_ref), k = 0.002, w_ref = 1047.2;
- *   friction b = 1e-06 N m s.
+ *   friction b = 1e-06 N m s;
+ *   gimbal G4: rate servo u_g = -k (gd4 - rate_ref), k = 0.004, rate_ref = p[rate_ref_4],
+ *     |u_g| clamped to 0.01 N m.
  * No translation: the system's mass center is fixed in A and free in N.
  * The rotor angles are not states: nothing depends on them.
  */

@@ -1854,6 +1854,741 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *CMG4_PYRAMID_RESTRICT J, double d,
+                     double *CMG4_PYRAMID_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[7] = -J[7];
+    a[9] = -J[9];
+    a[19] = d - J[19];
+    a[20] = -J[20];
+    a[25] = -J[25];
+    a[26] = -J[26];
+    a[27] = -J[27];
+    a[37] = -J[37];
+    a[38] = d - J[38];
+    a[43] = -J[43];
+    a[44] = -J[44];
+    a[45] = -J[45];
+    a[57] = d - J[57];
+    a[58] = -J[58];
+    a[59] = -J[59];
+    a[60] = -J[60];
+    a[61] = -J[61];
+    a[62] = -J[62];
+    a[63] = -J[63];
+    a[64] = -J[64];
+    a[65] = -J[65];
+    a[66] = -J[66];
+    a[67] = -J[67];
+    a[68] = -J[68];
+    a[69] = -J[69];
+    a[70] = -J[70];
+    a[71] = -J[71];
+    a[75] = -J[75];
+    a[76] = d - J[76];
+    a[77] = -J[77];
+    a[78] = -J[78];
+    a[79] = -J[79];
+    a[80] = -J[80];
+    a[81] = -J[81];
+    a[82] = -J[82];
+    a[83] = -J[83];
+    a[84] = -J[84];
+    a[85] = -J[85];
+    a[86] = -J[86];
+    a[87] = -J[87];
+    a[88] = -J[88];
+    a[89] = -J[89];
+    a[93] = -J[93];
+    a[94] = -J[94];
+    a[95] = d - J[95];
+    a[96] = -J[96];
+    a[97] = -J[97];
+    a[98] = -J[98];
+    a[99] = -J[99];
+    a[100] = -J[100];
+    a[101] = -J[101];
+    a[102] = -J[102];
+    a[103] = -J[103];
+    a[104] = -J[104];
+    a[105] = -J[105];
+    a[106] = -J[106];
+    a[107] = -J[107];
+    a[111] = -J[111];
+    a[112] = -J[112];
+    a[113] = -J[113];
+    a[114] = d - J[114];
+    a[115] = -J[115];
+    a[116] = -J[116];
+    a[117] = -J[117];
+    a[118] = -J[118];
+    a[119] = -J[119];
+    a[120] = -J[120];
+    a[121] = -J[121];
+    a[122] = -J[122];
+    a[123] = -J[123];
+    a[124] = -J[124];
+    a[125] = -J[125];
+    a[129] = -J[129];
+    a[130] = -J[130];
+    a[131] = -J[131];
+    a[132] = -J[132];
+    a[133] = d - J[133];
+    a[134] = -J[134];
+    a[135] = -J[135];
+    a[136] = -J[136];
+    a[137] = -J[137];
+    a[138] = -J[138];
+    a[139] = -J[139];
+    a[140] = -J[140];
+    a[141] = -J[141];
+    a[142] = -J[142];
+    a[143] = -J[143];
+    a[147] = -J[147];
+    a[148] = -J[148];
+    a[149] = -J[149];
+    a[150] = -J[150];
+    a[151] = -J[151];
+    a[152] = d - J[152];
+    a[153] = -J[153];
+    a[154] = -J[154];
+    a[155] = -J[155];
+    a[156] = -J[156];
+    a[157] = -J[157];
+    a[158] = -J[158];
+    a[159] = -J[159];
+    a[160] = -J[160];
+    a[161] = -J[161];
+    a[165] = -J[165];
+    a[166] = -J[166];
+    a[167] = -J[167];
+    a[168] = -J[168];
+    a[169] = -J[169];
+    a[170] = -J[170];
+    a[171] = d - J[171];
+    a[172] = -J[172];
+    a[173] = -J[173];
+    a[174] = -J[174];
+    a[175] = -J[175];
+    a[176] = -J[176];
+    a[177] = -J[177];
+    a[178] = -J[178];
+    a[179] = -J[179];
+    a[183] = -J[183];
+    a[184] = -J[184];
+    a[185] = -J[185];
+    a[186] = -J[186];
+    a[187] = -J[187];
+    a[188] = -J[188];
+    a[189] = -J[189];
+    a[190] = d - J[190];
+    a[191] = -J[191];
+    a[192] = -J[192];
+    a[193] = -J[193];
+    a[194] = -J[194];
+    a[195] = -J[195];
+    a[196] = -J[196];
+    a[197] = -J[197];
+    a[201] = -J[201];
+    a[202] = -J[202];
+    a[203] = -J[203];
+    a[204] = -J[204];
+    a[205] = -J[205];
+    a[206] = -J[206];
+    a[207] = -J[207];
+    a[208] = -J[208];
+    a[209] = d - J[209];
+    a[210] = -J[210];
+    a[211] = -J[211];
+    a[212] = -J[212];
+    a[213] = -J[213];
+    a[214] = -J[214];
+    a[215] = -J[215];
+    a[219] = -J[219];
+    a[220] = -J[220];
+    a[221] = -J[221];
+    a[222] = -J[222];
+    a[223] = -J[223];
+    a[224] = -J[224];
+    a[225] = -J[225];
+    a[226] = -J[226];
+    a[227] = -J[227];
+    a[228] = d - J[228];
+    a[229] = -J[229];
+    a[230] = -J[230];
+    a[231] = -J[231];
+    a[232] = -J[232];
+    a[233] = -J[233];
+    a[237] = -J[237];
+    a[238] = -J[238];
+    a[239] = -J[239];
+    a[240] = -J[240];
+    a[241] = -J[241];
+    a[242] = -J[242];
+    a[243] = -J[243];
+    a[244] = -J[244];
+    a[245] = -J[245];
+    a[246] = -J[246];
+    a[247] = d - J[247];
+    a[248] = -J[248];
+    a[249] = -J[249];
+    a[250] = -J[250];
+    a[251] = -J[251];
+    a[255] = -J[255];
+    a[256] = -J[256];
+    a[257] = -J[257];
+    a[258] = -J[258];
+    a[259] = -J[259];
+    a[260] = -J[260];
+    a[261] = -J[261];
+    a[262] = -J[262];
+    a[263] = -J[263];
+    a[264] = -J[264];
+    a[265] = -J[265];
+    a[266] = d - J[266];
+    a[267] = -J[267];
+    a[268] = -J[268];
+    a[269] = -J[269];
+    a[273] = -J[273];
+    a[274] = -J[274];
+    a[275] = -J[275];
+    a[276] = -J[276];
+    a[277] = -J[277];
+    a[278] = -J[278];
+    a[279] = -J[279];
+    a[280] = -J[280];
+    a[281] = -J[281];
+    a[282] = -J[282];
+    a[283] = -J[283];
+    a[284] = -J[284];
+    a[285] = d - J[285];
+    a[286] = -J[286];
+    a[287] = -J[287];
+    a[291] = -J[291];
+    a[292] = -J[292];
+    a[293] = -J[293];
+    a[294] = -J[294];
+    a[295] = -J[295];
+    a[296] = -J[296];
+    a[297] = -J[297];
+    a[298] = -J[298];
+    a[299] = -J[299];
+    a[300] = -J[300];
+    a[301] = -J[301];
+    a[302] = -J[302];
+    a[303] = -J[303];
+    a[304] = d - J[304];
+    a[305] = -J[305];
+    a[309] = -J[309];
+    a[310] = -J[310];
+    a[311] = -J[311];
+    a[312] = -J[312];
+    a[313] = -J[313];
+    a[314] = -J[314];
+    a[315] = -J[315];
+    a[316] = -J[316];
+    a[317] = -J[317];
+    a[318] = -J[318];
+    a[319] = -J[319];
+    a[320] = -J[320];
+    a[321] = -J[321];
+    a[322] = -J[322];
+    a[323] = d - J[323];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *CMG4_PYRAMID_RESTRICT J, double dr, double di,
+                             double *CMG4_PYRAMID_RESTRICT ar, double *CMG4_PYRAMID_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[7] = -J[7];
+    ai[7] = 0.0;
+    ar[9] = -J[9];
+    ai[9] = 0.0;
+    ar[19] = dr - J[19];
+    ai[19] = di;
+    ar[20] = -J[20];
+    ai[20] = 0.0;
+    ar[25] = -J[25];
+    ai[25] = 0.0;
+    ar[26] = -J[26];
+    ai[26] = 0.0;
+    ar[27] = -J[27];
+    ai[27] = 0.0;
+    ar[37] = -J[37];
+    ai[37] = 0.0;
+    ar[38] = dr - J[38];
+    ai[38] = di;
+    ar[43] = -J[43];
+    ai[43] = 0.0;
+    ar[44] = -J[44];
+    ai[44] = 0.0;
+    ar[45] = -J[45];
+    ai[45] = 0.0;
+    ar[57] = dr - J[57];
+    ai[57] = di;
+    ar[58] = -J[58];
+    ai[58] = 0.0;
+    ar[59] = -J[59];
+    ai[59] = 0.0;
+    ar[60] = -J[60];
+    ai[60] = 0.0;
+    ar[61] = -J[61];
+    ai[61] = 0.0;
+    ar[62] = -J[62];
+    ai[62] = 0.0;
+    ar[63] = -J[63];
+    ai[63] = 0.0;
+    ar[64] = -J[64];
+    ai[64] = 0.0;
+    ar[65] = -J[65];
+    ai[65] = 0.0;
+    ar[66] = -J[66];
+    ai[66] = 0.0;
+    ar[67] = -J[67];
+    ai[67] = 0.0;
+    ar[68] = -J[68];
+    ai[68] = 0.0;
+    ar[69] = -J[69];
+    ai[69] = 0.0;
+    ar[70] = -J[70];
+    ai[70] = 0.0;
+    ar[71] = -J[71];
+    ai[71] = 0.0;
+    ar[75] = -J[75];
+    ai[75] = 0.0;
+    ar[76] = dr - J[76];
+    ai[76] = di;
+    ar[77] = -J[77];
+    ai[77] = 0.0;
+    ar[78] = -J[78];
+    ai[78] = 0.0;
+    ar[79] = -J[79];
+    ai[79] = 0.0;
+    ar[80] = -J[80];
+    ai[80] = 0.0;
+    ar[81] = -J[81];
+    ai[81] = 0.0;
+    ar[82] = -J[82];
+    ai[82] = 0.0;
+    ar[83] = -J[83];
+    ai[83] = 0.0;
+    ar[84] = -J[84];
+    ai[84] = 0.0;
+    ar[85] = -J[85];
+    ai[85] = 0.0;
+    ar[86] = -J[86];
+    ai[86] = 0.0;
+    ar[87] = -J[87];
+    ai[87] = 0.0;
+    ar[88] = -J[88];
+    ai[88] = 0.0;
+    ar[89] = -J[89];
+    ai[89] = 0.0;
+    ar[93] = -J[93];
+    ai[93] = 0.0;
+    ar[94] = -J[94];
+    ai[94] = 0.0;
+    ar[95] = dr - J[95];
+    ai[95] = di;
+    ar[96] = -J[96];
+    ai[96] = 0.0;
+    ar[97] = -J[97];
+    ai[97] = 0.0;
+    ar[98] = -J[98];
+    ai[98] = 0.0;
+    ar[99] = -J[99];
+    ai[99] = 0.0;
+    ar[100] = -J[100];
+    ai[100] = 0.0;
+    ar[101] = -J[101];
+    ai[101] = 0.0;
+    ar[102] = -J[102];
+    ai[102] = 0.0;
+    ar[103] = -J[103];
+    ai[103] = 0.0;
+    ar[104] = -J[104];
+    ai[104] = 0.0;
+    ar[105] = -J[105];
+    ai[105] = 0.0;
+    ar[106] = -J[106];
+    ai[106] = 0.0;
+    ar[107] = -J[107];
+    ai[107] = 0.0;
+    ar[111] = -J[111];
+    ai[111] = 0.0;
+    ar[112] = -J[112];
+    ai[112] = 0.0;
+    ar[113] = -J[113];
+    ai[113] = 0.0;
+    ar[114] = dr - J[114];
+    ai[114] = di;
+    ar[115] = -J[115];
+    ai[115] = 0.0;
+    ar[116] = -J[116];
+    ai[116] = 0.0;
+    ar[117] = -J[117];
+    ai[117] = 0.0;
+    ar[118] = -J[118];
+    ai[118] = 0.0;
+    ar[119] = -J[119];
+    ai[119] = 0.0;
+    ar[120] = -J[120];
+    ai[120] = 0.0;
+    ar[121] = -J[121];
+    ai[121] = 0.0;
+    ar[122] = -J[122];
+    ai[122] = 0.0;
+    ar[123] = -J[123];
+    ai[123] = 0.0;
+    ar[124] = -J[124];
+    ai[124] = 0.0;
+    ar[125] = -J[125];
+    ai[125] = 0.0;
+    ar[129] = -J[129];
+    ai[129] = 0.0;
+    ar[130] = -J[130];
+    ai[130] = 0.0;
+    ar[131] = -J[131];
+    ai[131] = 0.0;
+    ar[132] = -J[132];
+    ai[132] = 0.0;
+    ar[133] = dr - J[133];
+    ai[133] = di;
+    ar[134] = -J[134];
+    ai[134] = 0.0;
+    ar[135] = -J[135];
+    ai[135] = 0.0;
+    ar[136] = -J[136];
+    ai[136] = 0.0;
+    ar[137] = -J[137];
+    ai[137] = 0.0;
+    ar[138] = -J[138];
+    ai[138] = 0.0;
+    ar[139] = -J[139];
+    ai[139] = 0.0;
+    ar[140] = -J[140];
+    ai[140] = 0.0;
+    ar[141] = -J[141];
+    ai[141] = 0.0;
+    ar[142] = -J[142];
+    ai[142] = 0.0;
+    ar[143] = -J[143];
+    ai[143] = 0.0;
+    ar[147] = -J[147];
+    ai[147] = 0.0;
+    ar[148] = -J[148];
+    ai[148] = 0.0;
+    ar[149] = -J[149];
+    ai[149] = 0.0;
+    ar[150] = -J[150];
+    ai[150] = 0.0;
+    ar[151] = -J[151];
+    ai[151] = 0.0;
+    ar[152] = dr - J[152];
+    ai[152] = di;
+    ar[153] = -J[153];
+    ai[153] = 0.0;
+    ar[154] = -J[154];
+    ai[154] = 0.0;
+    ar[155] = -J[155];
+    ai[155] = 0.0;
+    ar[156] = -J[156];
+    ai[156] = 0.0;
+    ar[157] = -J[157];
+    ai[157] = 0.0;
+    ar[158] = -J[158];
+    ai[158] = 0.0;
+    ar[159] = -J[159];
+    ai[159] = 0.0;
+    ar[160] = -J[160];
+    ai[160] = 0.0;
+    ar[161] = -J[161];
+    ai[161] = 0.0;
+    ar[165] = -J[165];
+    ai[165] = 0.0;
+    ar[166] = -J[166];
+    ai[166] = 0.0;
+    ar[167] = -J[167];
+    ai[167] = 0.0;
+    ar[168] = -J[168];
+    ai[168] = 0.0;
+    ar[169] = -J[169];
+    ai[169] = 0.0;
+    ar[170] = -J[170];
+    ai[170] = 0.0;
+    ar[171] = dr - J[171];
+    ai[171] = di;
+    ar[172] = -J[172];
+    ai[172] = 0.0;
+    ar[173] = -J[173];
+    ai[173] = 0.0;
+    ar[174] = -J[174];
+    ai[174] = 0.0;
+    ar[175] = -J[175];
+    ai[175] = 0.0;
+    ar[176] = -J[176];
+    ai[176] = 0.0;
+    ar[177] = -J[177];
+    ai[177] = 0.0;
+    ar[178] = -J[178];
+    ai[178] = 0.0;
+    ar[179] = -J[179];
+    ai[179] = 0.0;
+    ar[183] = -J[183];
+    ai[183] = 0.0;
+    ar[184] = -J[184];
+    ai[184] = 0.0;
+    ar[185] = -J[185];
+    ai[185] = 0.0;
+    ar[186] = -J[186];
+    ai[186] = 0.0;
+    ar[187] = -J[187];
+    ai[187] = 0.0;
+    ar[188] = -J[188];
+    ai[188] = 0.0;
+    ar[189] = -J[189];
+    ai[189] = 0.0;
+    ar[190] = dr - J[190];
+    ai[190] = di;
+    ar[191] = -J[191];
+    ai[191] = 0.0;
+    ar[192] = -J[192];
+    ai[192] = 0.0;
+    ar[193] = -J[193];
+    ai[193] = 0.0;
+    ar[194] = -J[194];
+    ai[194] = 0.0;
+    ar[195] = -J[195];
+    ai[195] = 0.0;
+    ar[196] = -J[196];
+    ai[196] = 0.0;
+    ar[197] = -J[197];
+    ai[197] = 0.0;
+    ar[201] = -J[201];
+    ai[201] = 0.0;
+    ar[202] = -J[202];
+    ai[202] = 0.0;
+    ar[203] = -J[203];
+    ai[203] = 0.0;
+    ar[204] = -J[204];
+    ai[204] = 0.0;
+    ar[205] = -J[205];
+    ai[205] = 0.0;
+    ar[206] = -J[206];
+    ai[206] = 0.0;
+    ar[207] = -J[207];
+    ai[207] = 0.0;
+    ar[208] = -J[208];
+    ai[208] = 0.0;
+    ar[209] = dr - J[209];
+    ai[209] = di;
+    ar[210] = -J[210];
+    ai[210] = 0.0;
+    ar[211] = -J[211];
+    ai[211] = 0.0;
+    ar[212] = -J[212];
+    ai[212] = 0.0;
+    ar[213] = -J[213];
+    ai[213] = 0.0;
+    ar[214] = -J[214];
+    ai[214] = 0.0;
+    ar[215] = -J[215];
+    ai[215] = 0.0;
+    ar[219] = -J[219];
+    ai[219] = 0.0;
+    ar[220] = -J[220];
+    ai[220] = 0.0;
+    ar[221] = -J[221];
+    ai[221] = 0.0;
+    ar[222] = -J[222];
+    ai[222] = 0.0;
+    ar[223] = -J[223];
+    ai[223] = 0.0;
+    ar[224] = -J[224];
+    ai[224] = 0.0;
+    ar[225] = -J[225];
+    ai[225] = 0.0;
+    ar[226] = -J[226];
+    ai[226] = 0.0;
+    ar[227] = -J[227];
+    ai[227] = 0.0;
+    ar[228] = dr - J[228];
+    ai[228] = di;
+    ar[229] = -J[229];
+    ai[229] = 0.0;
+    ar[230] = -J[230];
+    ai[230] = 0.0;
+    ar[231] = -J[231];
+    ai[231] = 0.0;
+    ar[232] = -J[232];
+    ai[232] = 0.0;
+    ar[233] = -J[233];
+    ai[233] = 0.0;
+    ar[237] = -J[237];
+    ai[237] = 0.0;
+    ar[238] = -J[238];
+    ai[238] = 0.0;
+    ar[239] = -J[239];
+    ai[239] = 0.0;
+    ar[240] = -J[240];
+    ai[240] = 0.0;
+    ar[241] = -J[241];
+    ai[241] = 0.0;
+    ar[242] = -J[242];
+    ai[242] = 0.0;
+    ar[243] = -J[243];
+    ai[243] = 0.0;
+    ar[244] = -J[244];
+    ai[244] = 0.0;
+    ar[245] = -J[245];
+    ai[245] = 0.0;
+    ar[246] = -J[246];
+    ai[246] = 0.0;
+    ar[247] = dr - J[247];
+    ai[247] = di;
+    ar[248] = -J[248];
+    ai[248] = 0.0;
+    ar[249] = -J[249];
+    ai[249] = 0.0;
+    ar[250] = -J[250];
+    ai[250] = 0.0;
+    ar[251] = -J[251];
+    ai[251] = 0.0;
+    ar[255] = -J[255];
+    ai[255] = 0.0;
+    ar[256] = -J[256];
+    ai[256] = 0.0;
+    ar[257] = -J[257];
+    ai[257] = 0.0;
+    ar[258] = -J[258];
+    ai[258] = 0.0;
+    ar[259] = -J[259];
+    ai[259] = 0.0;
+    ar[260] = -J[260];
+    ai[260] = 0.0;
+    ar[261] = -J[261];
+    ai[261] = 0.0;
+    ar[262] = -J[262];
+    ai[262] = 0.0;
+    ar[263] = -J[263];
+    ai[263] = 0.0;
+    ar[264] = -J[264];
+    ai[264] = 0.0;
+    ar[265] = -J[265];
+    ai[265] = 0.0;
+    ar[266] = dr - J[266];
+    ai[266] = di;
+    ar[267] = -J[267];
+    ai[267] = 0.0;
+    ar[268] = -J[268];
+    ai[268] = 0.0;
+    ar[269] = -J[269];
+    ai[269] = 0.0;
+    ar[273] = -J[273];
+    ai[273] = 0.0;
+    ar[274] = -J[274];
+    ai[274] = 0.0;
+    ar[275] = -J[275];
+    ai[275] = 0.0;
+    ar[276] = -J[276];
+    ai[276] = 0.0;
+    ar[277] = -J[277];
+    ai[277] = 0.0;
+    ar[278] = -J[278];
+    ai[278] = 0.0;
+    ar[279] = -J[279];
+    ai[279] = 0.0;
+    ar[280] = -J[280];
+    ai[280] = 0.0;
+    ar[281] = -J[281];
+    ai[281] = 0.0;
+    ar[282] = -J[282];
+    ai[282] = 0.0;
+    ar[283] = -J[283];
+    ai[283] = 0.0;
+    ar[284] = -J[284];
+    ai[284] = 0.0;
+    ar[285] = dr - J[285];
+    ai[285] = di;
+    ar[286] = -J[286];
+    ai[286] = 0.0;
+    ar[287] = -J[287];
+    ai[287] = 0.0;
+    ar[291] = -J[291];
+    ai[291] = 0.0;
+    ar[292] = -J[292];
+    ai[292] = 0.0;
+    ar[293] = -J[293];
+    ai[293] = 0.0;
+    ar[294] = -J[294];
+    ai[294] = 0.0;
+    ar[295] = -J[295];
+    ai[295] = 0.0;
+    ar[296] = -J[296];
+    ai[296] = 0.0;
+    ar[297] = -J[297];
+    ai[297] = 0.0;
+    ar[298] = -J[298];
+    ai[298] = 0.0;
+    ar[299] = -J[299];
+    ai[299] = 0.0;
+    ar[300] = -J[300];
+    ai[300] = 0.0;
+    ar[301] = -J[301];
+    ai[301] = 0.0;
+    ar[302] = -J[302];
+    ai[302] = 0.0;
+    ar[303] = -J[303];
+    ai[303] = 0.0;
+    ar[304] = dr - J[304];
+    ai[304] = di;
+    ar[305] = -J[305];
+    ai[305] = 0.0;
+    ar[309] = -J[309];
+    ai[309] = 0.0;
+    ar[310] = -J[310];
+    ai[310] = 0.0;
+    ar[311] = -J[311];
+    ai[311] = 0.0;
+    ar[312] = -J[312];
+    ai[312] = 0.0;
+    ar[313] = -J[313];
+    ai[313] = 0.0;
+    ar[314] = -J[314];
+    ai[314] = 0.0;
+    ar[315] = -J[315];
+    ai[315] = 0.0;
+    ar[316] = -J[316];
+    ai[316] = 0.0;
+    ar[317] = -J[317];
+    ai[317] = 0.0;
+    ar[318] = -J[318];
+    ai[318] = 0.0;
+    ar[319] = -J[319];
+    ai[319] = 0.0;
+    ar[320] = -J[320];
+    ai[320] = 0.0;
+    ar[321] = -J[321];
+    ai[321] = 0.0;
+    ar[322] = -J[322];
+    ai[322] = 0.0;
+    ar[323] = dr - J[323];
+    ai[323] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 18), unrolled over the entries
    of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -1886,11 +2621,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * CMG4_PYRAMID_NX + j];
             a[1 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
         }
+        swap = a[25];
+        a[25] = a[p * CMG4_PYRAMID_NX + 7];
+        a[p * CMG4_PYRAMID_NX + 7] = swap;
+        swap = a[26];
+        a[26] = a[p * CMG4_PYRAMID_NX + 8];
+        a[p * CMG4_PYRAMID_NX + 8] = swap;
+        swap = a[27];
+        a[27] = a[p * CMG4_PYRAMID_NX + 9];
+        a[p * CMG4_PYRAMID_NX + 9] = swap;
     }
     a[19] = 1.0 / a[19];
     for (i = 2; i < 3; ++i) {
@@ -1924,7 +2668,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[3 * CMG4_PYRAMID_NX + j];
             a[3 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -1974,7 +2718,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[4 * CMG4_PYRAMID_NX + j];
             a[4 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2022,7 +2766,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[5 * CMG4_PYRAMID_NX + j];
             a[5 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2068,7 +2812,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[6 * CMG4_PYRAMID_NX + j];
             a[6 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2112,7 +2856,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[7 * CMG4_PYRAMID_NX + j];
             a[7 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2154,7 +2898,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[8 * CMG4_PYRAMID_NX + j];
             a[8 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2194,7 +2938,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 9) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[9 * CMG4_PYRAMID_NX + j];
             a[9 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2232,7 +2976,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 10) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[10 * CMG4_PYRAMID_NX + j];
             a[10 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2268,7 +3012,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 11) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[11 * CMG4_PYRAMID_NX + j];
             a[11 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2302,7 +3046,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 12) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[12 * CMG4_PYRAMID_NX + j];
             a[12 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2334,7 +3078,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 13) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[13 * CMG4_PYRAMID_NX + j];
             a[13 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2364,7 +3108,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 14) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[14 * CMG4_PYRAMID_NX + j];
             a[14 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2392,7 +3136,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 15) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[15 * CMG4_PYRAMID_NX + j];
             a[15 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2418,7 +3162,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 16) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = a[16 * CMG4_PYRAMID_NX + j];
             a[16 * CMG4_PYRAMID_NX + j] = a[p * CMG4_PYRAMID_NX + j];
             a[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2651,7 +3395,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * CMG4_PYRAMID_NX + j];
             ar[1 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2659,6 +3403,24 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
             ai[1 * CMG4_PYRAMID_NX + j] = ai[p * CMG4_PYRAMID_NX + j];
             ai[p * CMG4_PYRAMID_NX + j] = swap;
         }
+        swap = ar[25];
+        ar[25] = ar[p * CMG4_PYRAMID_NX + 7];
+        ar[p * CMG4_PYRAMID_NX + 7] = swap;
+        swap = ai[25];
+        ai[25] = ai[p * CMG4_PYRAMID_NX + 7];
+        ai[p * CMG4_PYRAMID_NX + 7] = swap;
+        swap = ar[26];
+        ar[26] = ar[p * CMG4_PYRAMID_NX + 8];
+        ar[p * CMG4_PYRAMID_NX + 8] = swap;
+        swap = ai[26];
+        ai[26] = ai[p * CMG4_PYRAMID_NX + 8];
+        ai[p * CMG4_PYRAMID_NX + 8] = swap;
+        swap = ar[27];
+        ar[27] = ar[p * CMG4_PYRAMID_NX + 9];
+        ar[p * CMG4_PYRAMID_NX + 9] = swap;
+        swap = ai[27];
+        ai[27] = ai[p * CMG4_PYRAMID_NX + 9];
+        ai[p * CMG4_PYRAMID_NX + 9] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[19];
@@ -2754,7 +3516,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[3 * CMG4_PYRAMID_NX + j];
             ar[3 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -2907,7 +3669,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[4 * CMG4_PYRAMID_NX + j];
             ar[4 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3052,7 +3814,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[5 * CMG4_PYRAMID_NX + j];
             ar[5 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3189,7 +3951,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[6 * CMG4_PYRAMID_NX + j];
             ar[6 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3318,7 +4080,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[7 * CMG4_PYRAMID_NX + j];
             ar[7 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3439,7 +4201,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[8 * CMG4_PYRAMID_NX + j];
             ar[8 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3552,7 +4314,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 9) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[9 * CMG4_PYRAMID_NX + j];
             ar[9 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3657,7 +4419,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 10) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[10 * CMG4_PYRAMID_NX + j];
             ar[10 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3754,7 +4516,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 11) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[11 * CMG4_PYRAMID_NX + j];
             ar[11 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3843,7 +4605,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 12) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[12 * CMG4_PYRAMID_NX + j];
             ar[12 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3924,7 +4686,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 13) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[13 * CMG4_PYRAMID_NX + j];
             ar[13 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -3997,7 +4759,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 14) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[14 * CMG4_PYRAMID_NX + j];
             ar[14 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -4062,7 +4824,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 15) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[15 * CMG4_PYRAMID_NX + j];
             ar[15 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -4119,7 +4881,7 @@ static int lu_decompose_complex(double *CMG4_PYRAMID_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 16) {
-        for (j = 3; j < CMG4_PYRAMID_NX; ++j) {
+        for (j = 3; j < 18; ++j) {
             swap = ar[16 * CMG4_PYRAMID_NX + j];
             ar[16 * CMG4_PYRAMID_NX + j] = ar[p * CMG4_PYRAMID_NX + j];
             ar[p * CMG4_PYRAMID_NX + j] = swap;
@@ -8717,12 +9479,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
-            lu[i * CMG4_PYRAMID_NX + i] = lu[i * CMG4_PYRAMID_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -8879,12 +9636,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
-            lu[i * CMG4_PYRAMID_NX + i] = lu[i * CMG4_PYRAMID_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -9022,23 +9774,8 @@ size_t cmg4_pyramid_rodas4_grid_batch(size_t n, long ntimes, const double *times
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < CMG4_PYRAMID_NX * CMG4_PYRAMID_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < CMG4_PYRAMID_NX; ++i) {
-        e1[i * CMG4_PYRAMID_NX + i] = e1[i * CMG4_PYRAMID_NX + i] + gamma_h;
-        e2r[i * CMG4_PYRAMID_NX + i] = e2r[i * CMG4_PYRAMID_NX + i] + alpha_h;
-        e2i[i * CMG4_PYRAMID_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }

@@ -1921,6 +1921,747 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(7) = -J(7)
+    a(9) = -J(9)
+    a(19) = d - J(19)
+    a(20) = -J(20)
+    a(25) = -J(25)
+    a(26) = -J(26)
+    a(27) = -J(27)
+    a(37) = -J(37)
+    a(38) = d - J(38)
+    a(43) = -J(43)
+    a(44) = -J(44)
+    a(45) = -J(45)
+    a(57) = d - J(57)
+    a(58) = -J(58)
+    a(59) = -J(59)
+    a(60) = -J(60)
+    a(61) = -J(61)
+    a(62) = -J(62)
+    a(63) = -J(63)
+    a(64) = -J(64)
+    a(65) = -J(65)
+    a(66) = -J(66)
+    a(67) = -J(67)
+    a(68) = -J(68)
+    a(69) = -J(69)
+    a(70) = -J(70)
+    a(71) = -J(71)
+    a(75) = -J(75)
+    a(76) = d - J(76)
+    a(77) = -J(77)
+    a(78) = -J(78)
+    a(79) = -J(79)
+    a(80) = -J(80)
+    a(81) = -J(81)
+    a(82) = -J(82)
+    a(83) = -J(83)
+    a(84) = -J(84)
+    a(85) = -J(85)
+    a(86) = -J(86)
+    a(87) = -J(87)
+    a(88) = -J(88)
+    a(89) = -J(89)
+    a(93) = -J(93)
+    a(94) = -J(94)
+    a(95) = d - J(95)
+    a(96) = -J(96)
+    a(97) = -J(97)
+    a(98) = -J(98)
+    a(99) = -J(99)
+    a(100) = -J(100)
+    a(101) = -J(101)
+    a(102) = -J(102)
+    a(103) = -J(103)
+    a(104) = -J(104)
+    a(105) = -J(105)
+    a(106) = -J(106)
+    a(107) = -J(107)
+    a(111) = -J(111)
+    a(112) = -J(112)
+    a(113) = -J(113)
+    a(114) = d - J(114)
+    a(115) = -J(115)
+    a(116) = -J(116)
+    a(117) = -J(117)
+    a(118) = -J(118)
+    a(119) = -J(119)
+    a(120) = -J(120)
+    a(121) = -J(121)
+    a(122) = -J(122)
+    a(123) = -J(123)
+    a(124) = -J(124)
+    a(125) = -J(125)
+    a(129) = -J(129)
+    a(130) = -J(130)
+    a(131) = -J(131)
+    a(132) = -J(132)
+    a(133) = d - J(133)
+    a(134) = -J(134)
+    a(135) = -J(135)
+    a(136) = -J(136)
+    a(137) = -J(137)
+    a(138) = -J(138)
+    a(139) = -J(139)
+    a(140) = -J(140)
+    a(141) = -J(141)
+    a(142) = -J(142)
+    a(143) = -J(143)
+    a(147) = -J(147)
+    a(148) = -J(148)
+    a(149) = -J(149)
+    a(150) = -J(150)
+    a(151) = -J(151)
+    a(152) = d - J(152)
+    a(153) = -J(153)
+    a(154) = -J(154)
+    a(155) = -J(155)
+    a(156) = -J(156)
+    a(157) = -J(157)
+    a(158) = -J(158)
+    a(159) = -J(159)
+    a(160) = -J(160)
+    a(161) = -J(161)
+    a(165) = -J(165)
+    a(166) = -J(166)
+    a(167) = -J(167)
+    a(168) = -J(168)
+    a(169) = -J(169)
+    a(170) = -J(170)
+    a(171) = d - J(171)
+    a(172) = -J(172)
+    a(173) = -J(173)
+    a(174) = -J(174)
+    a(175) = -J(175)
+    a(176) = -J(176)
+    a(177) = -J(177)
+    a(178) = -J(178)
+    a(179) = -J(179)
+    a(183) = -J(183)
+    a(184) = -J(184)
+    a(185) = -J(185)
+    a(186) = -J(186)
+    a(187) = -J(187)
+    a(188) = -J(188)
+    a(189) = -J(189)
+    a(190) = d - J(190)
+    a(191) = -J(191)
+    a(192) = -J(192)
+    a(193) = -J(193)
+    a(194) = -J(194)
+    a(195) = -J(195)
+    a(196) = -J(196)
+    a(197) = -J(197)
+    a(201) = -J(201)
+    a(202) = -J(202)
+    a(203) = -J(203)
+    a(204) = -J(204)
+    a(205) = -J(205)
+    a(206) = -J(206)
+    a(207) = -J(207)
+    a(208) = -J(208)
+    a(209) = d - J(209)
+    a(210) = -J(210)
+    a(211) = -J(211)
+    a(212) = -J(212)
+    a(213) = -J(213)
+    a(214) = -J(214)
+    a(215) = -J(215)
+    a(219) = -J(219)
+    a(220) = -J(220)
+    a(221) = -J(221)
+    a(222) = -J(222)
+    a(223) = -J(223)
+    a(224) = -J(224)
+    a(225) = -J(225)
+    a(226) = -J(226)
+    a(227) = -J(227)
+    a(228) = d - J(228)
+    a(229) = -J(229)
+    a(230) = -J(230)
+    a(231) = -J(231)
+    a(232) = -J(232)
+    a(233) = -J(233)
+    a(237) = -J(237)
+    a(238) = -J(238)
+    a(239) = -J(239)
+    a(240) = -J(240)
+    a(241) = -J(241)
+    a(242) = -J(242)
+    a(243) = -J(243)
+    a(244) = -J(244)
+    a(245) = -J(245)
+    a(246) = -J(246)
+    a(247) = d - J(247)
+    a(248) = -J(248)
+    a(249) = -J(249)
+    a(250) = -J(250)
+    a(251) = -J(251)
+    a(255) = -J(255)
+    a(256) = -J(256)
+    a(257) = -J(257)
+    a(258) = -J(258)
+    a(259) = -J(259)
+    a(260) = -J(260)
+    a(261) = -J(261)
+    a(262) = -J(262)
+    a(263) = -J(263)
+    a(264) = -J(264)
+    a(265) = -J(265)
+    a(266) = d - J(266)
+    a(267) = -J(267)
+    a(268) = -J(268)
+    a(269) = -J(269)
+    a(273) = -J(273)
+    a(274) = -J(274)
+    a(275) = -J(275)
+    a(276) = -J(276)
+    a(277) = -J(277)
+    a(278) = -J(278)
+    a(279) = -J(279)
+    a(280) = -J(280)
+    a(281) = -J(281)
+    a(282) = -J(282)
+    a(283) = -J(283)
+    a(284) = -J(284)
+    a(285) = d - J(285)
+    a(286) = -J(286)
+    a(287) = -J(287)
+    a(291) = -J(291)
+    a(292) = -J(292)
+    a(293) = -J(293)
+    a(294) = -J(294)
+    a(295) = -J(295)
+    a(296) = -J(296)
+    a(297) = -J(297)
+    a(298) = -J(298)
+    a(299) = -J(299)
+    a(300) = -J(300)
+    a(301) = -J(301)
+    a(302) = -J(302)
+    a(303) = -J(303)
+    a(304) = d - J(304)
+    a(305) = -J(305)
+    a(309) = -J(309)
+    a(310) = -J(310)
+    a(311) = -J(311)
+    a(312) = -J(312)
+    a(313) = -J(313)
+    a(314) = -J(314)
+    a(315) = -J(315)
+    a(316) = -J(316)
+    a(317) = -J(317)
+    a(318) = -J(318)
+    a(319) = -J(319)
+    a(320) = -J(320)
+    a(321) = -J(321)
+    a(322) = -J(322)
+    a(323) = d - J(323)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(7) = -J(7)
+    ai(7) = 0.0_c_double
+    ar(9) = -J(9)
+    ai(9) = 0.0_c_double
+    ar(19) = dr - J(19)
+    ai(19) = di
+    ar(20) = -J(20)
+    ai(20) = 0.0_c_double
+    ar(25) = -J(25)
+    ai(25) = 0.0_c_double
+    ar(26) = -J(26)
+    ai(26) = 0.0_c_double
+    ar(27) = -J(27)
+    ai(27) = 0.0_c_double
+    ar(37) = -J(37)
+    ai(37) = 0.0_c_double
+    ar(38) = dr - J(38)
+    ai(38) = di
+    ar(43) = -J(43)
+    ai(43) = 0.0_c_double
+    ar(44) = -J(44)
+    ai(44) = 0.0_c_double
+    ar(45) = -J(45)
+    ai(45) = 0.0_c_double
+    ar(57) = dr - J(57)
+    ai(57) = di
+    ar(58) = -J(58)
+    ai(58) = 0.0_c_double
+    ar(59) = -J(59)
+    ai(59) = 0.0_c_double
+    ar(60) = -J(60)
+    ai(60) = 0.0_c_double
+    ar(61) = -J(61)
+    ai(61) = 0.0_c_double
+    ar(62) = -J(62)
+    ai(62) = 0.0_c_double
+    ar(63) = -J(63)
+    ai(63) = 0.0_c_double
+    ar(64) = -J(64)
+    ai(64) = 0.0_c_double
+    ar(65) = -J(65)
+    ai(65) = 0.0_c_double
+    ar(66) = -J(66)
+    ai(66) = 0.0_c_double
+    ar(67) = -J(67)
+    ai(67) = 0.0_c_double
+    ar(68) = -J(68)
+    ai(68) = 0.0_c_double
+    ar(69) = -J(69)
+    ai(69) = 0.0_c_double
+    ar(70) = -J(70)
+    ai(70) = 0.0_c_double
+    ar(71) = -J(71)
+    ai(71) = 0.0_c_double
+    ar(75) = -J(75)
+    ai(75) = 0.0_c_double
+    ar(76) = dr - J(76)
+    ai(76) = di
+    ar(77) = -J(77)
+    ai(77) = 0.0_c_double
+    ar(78) = -J(78)
+    ai(78) = 0.0_c_double
+    ar(79) = -J(79)
+    ai(79) = 0.0_c_double
+    ar(80) = -J(80)
+    ai(80) = 0.0_c_double
+    ar(81) = -J(81)
+    ai(81) = 0.0_c_double
+    ar(82) = -J(82)
+    ai(82) = 0.0_c_double
+    ar(83) = -J(83)
+    ai(83) = 0.0_c_double
+    ar(84) = -J(84)
+    ai(84) = 0.0_c_double
+    ar(85) = -J(85)
+    ai(85) = 0.0_c_double
+    ar(86) = -J(86)
+    ai(86) = 0.0_c_double
+    ar(87) = -J(87)
+    ai(87) = 0.0_c_double
+    ar(88) = -J(88)
+    ai(88) = 0.0_c_double
+    ar(89) = -J(89)
+    ai(89) = 0.0_c_double
+    ar(93) = -J(93)
+    ai(93) = 0.0_c_double
+    ar(94) = -J(94)
+    ai(94) = 0.0_c_double
+    ar(95) = dr - J(95)
+    ai(95) = di
+    ar(96) = -J(96)
+    ai(96) = 0.0_c_double
+    ar(97) = -J(97)
+    ai(97) = 0.0_c_double
+    ar(98) = -J(98)
+    ai(98) = 0.0_c_double
+    ar(99) = -J(99)
+    ai(99) = 0.0_c_double
+    ar(100) = -J(100)
+    ai(100) = 0.0_c_double
+    ar(101) = -J(101)
+    ai(101) = 0.0_c_double
+    ar(102) = -J(102)
+    ai(102) = 0.0_c_double
+    ar(103) = -J(103)
+    ai(103) = 0.0_c_double
+    ar(104) = -J(104)
+    ai(104) = 0.0_c_double
+    ar(105) = -J(105)
+    ai(105) = 0.0_c_double
+    ar(106) = -J(106)
+    ai(106) = 0.0_c_double
+    ar(107) = -J(107)
+    ai(107) = 0.0_c_double
+    ar(111) = -J(111)
+    ai(111) = 0.0_c_double
+    ar(112) = -J(112)
+    ai(112) = 0.0_c_double
+    ar(113) = -J(113)
+    ai(113) = 0.0_c_double
+    ar(114) = dr - J(114)
+    ai(114) = di
+    ar(115) = -J(115)
+    ai(115) = 0.0_c_double
+    ar(116) = -J(116)
+    ai(116) = 0.0_c_double
+    ar(117) = -J(117)
+    ai(117) = 0.0_c_double
+    ar(118) = -J(118)
+    ai(118) = 0.0_c_double
+    ar(119) = -J(119)
+    ai(119) = 0.0_c_double
+    ar(120) = -J(120)
+    ai(120) = 0.0_c_double
+    ar(121) = -J(121)
+    ai(121) = 0.0_c_double
+    ar(122) = -J(122)
+    ai(122) = 0.0_c_double
+    ar(123) = -J(123)
+    ai(123) = 0.0_c_double
+    ar(124) = -J(124)
+    ai(124) = 0.0_c_double
+    ar(125) = -J(125)
+    ai(125) = 0.0_c_double
+    ar(129) = -J(129)
+    ai(129) = 0.0_c_double
+    ar(130) = -J(130)
+    ai(130) = 0.0_c_double
+    ar(131) = -J(131)
+    ai(131) = 0.0_c_double
+    ar(132) = -J(132)
+    ai(132) = 0.0_c_double
+    ar(133) = dr - J(133)
+    ai(133) = di
+    ar(134) = -J(134)
+    ai(134) = 0.0_c_double
+    ar(135) = -J(135)
+    ai(135) = 0.0_c_double
+    ar(136) = -J(136)
+    ai(136) = 0.0_c_double
+    ar(137) = -J(137)
+    ai(137) = 0.0_c_double
+    ar(138) = -J(138)
+    ai(138) = 0.0_c_double
+    ar(139) = -J(139)
+    ai(139) = 0.0_c_double
+    ar(140) = -J(140)
+    ai(140) = 0.0_c_double
+    ar(141) = -J(141)
+    ai(141) = 0.0_c_double
+    ar(142) = -J(142)
+    ai(142) = 0.0_c_double
+    ar(143) = -J(143)
+    ai(143) = 0.0_c_double
+    ar(147) = -J(147)
+    ai(147) = 0.0_c_double
+    ar(148) = -J(148)
+    ai(148) = 0.0_c_double
+    ar(149) = -J(149)
+    ai(149) = 0.0_c_double
+    ar(150) = -J(150)
+    ai(150) = 0.0_c_double
+    ar(151) = -J(151)
+    ai(151) = 0.0_c_double
+    ar(152) = dr - J(152)
+    ai(152) = di
+    ar(153) = -J(153)
+    ai(153) = 0.0_c_double
+    ar(154) = -J(154)
+    ai(154) = 0.0_c_double
+    ar(155) = -J(155)
+    ai(155) = 0.0_c_double
+    ar(156) = -J(156)
+    ai(156) = 0.0_c_double
+    ar(157) = -J(157)
+    ai(157) = 0.0_c_double
+    ar(158) = -J(158)
+    ai(158) = 0.0_c_double
+    ar(159) = -J(159)
+    ai(159) = 0.0_c_double
+    ar(160) = -J(160)
+    ai(160) = 0.0_c_double
+    ar(161) = -J(161)
+    ai(161) = 0.0_c_double
+    ar(165) = -J(165)
+    ai(165) = 0.0_c_double
+    ar(166) = -J(166)
+    ai(166) = 0.0_c_double
+    ar(167) = -J(167)
+    ai(167) = 0.0_c_double
+    ar(168) = -J(168)
+    ai(168) = 0.0_c_double
+    ar(169) = -J(169)
+    ai(169) = 0.0_c_double
+    ar(170) = -J(170)
+    ai(170) = 0.0_c_double
+    ar(171) = dr - J(171)
+    ai(171) = di
+    ar(172) = -J(172)
+    ai(172) = 0.0_c_double
+    ar(173) = -J(173)
+    ai(173) = 0.0_c_double
+    ar(174) = -J(174)
+    ai(174) = 0.0_c_double
+    ar(175) = -J(175)
+    ai(175) = 0.0_c_double
+    ar(176) = -J(176)
+    ai(176) = 0.0_c_double
+    ar(177) = -J(177)
+    ai(177) = 0.0_c_double
+    ar(178) = -J(178)
+    ai(178) = 0.0_c_double
+    ar(179) = -J(179)
+    ai(179) = 0.0_c_double
+    ar(183) = -J(183)
+    ai(183) = 0.0_c_double
+    ar(184) = -J(184)
+    ai(184) = 0.0_c_double
+    ar(185) = -J(185)
+    ai(185) = 0.0_c_double
+    ar(186) = -J(186)
+    ai(186) = 0.0_c_double
+    ar(187) = -J(187)
+    ai(187) = 0.0_c_double
+    ar(188) = -J(188)
+    ai(188) = 0.0_c_double
+    ar(189) = -J(189)
+    ai(189) = 0.0_c_double
+    ar(190) = dr - J(190)
+    ai(190) = di
+    ar(191) = -J(191)
+    ai(191) = 0.0_c_double
+    ar(192) = -J(192)
+    ai(192) = 0.0_c_double
+    ar(193) = -J(193)
+    ai(193) = 0.0_c_double
+    ar(194) = -J(194)
+    ai(194) = 0.0_c_double
+    ar(195) = -J(195)
+    ai(195) = 0.0_c_double
+    ar(196) = -J(196)
+    ai(196) = 0.0_c_double
+    ar(197) = -J(197)
+    ai(197) = 0.0_c_double
+    ar(201) = -J(201)
+    ai(201) = 0.0_c_double
+    ar(202) = -J(202)
+    ai(202) = 0.0_c_double
+    ar(203) = -J(203)
+    ai(203) = 0.0_c_double
+    ar(204) = -J(204)
+    ai(204) = 0.0_c_double
+    ar(205) = -J(205)
+    ai(205) = 0.0_c_double
+    ar(206) = -J(206)
+    ai(206) = 0.0_c_double
+    ar(207) = -J(207)
+    ai(207) = 0.0_c_double
+    ar(208) = -J(208)
+    ai(208) = 0.0_c_double
+    ar(209) = dr - J(209)
+    ai(209) = di
+    ar(210) = -J(210)
+    ai(210) = 0.0_c_double
+    ar(211) = -J(211)
+    ai(211) = 0.0_c_double
+    ar(212) = -J(212)
+    ai(212) = 0.0_c_double
+    ar(213) = -J(213)
+    ai(213) = 0.0_c_double
+    ar(214) = -J(214)
+    ai(214) = 0.0_c_double
+    ar(215) = -J(215)
+    ai(215) = 0.0_c_double
+    ar(219) = -J(219)
+    ai(219) = 0.0_c_double
+    ar(220) = -J(220)
+    ai(220) = 0.0_c_double
+    ar(221) = -J(221)
+    ai(221) = 0.0_c_double
+    ar(222) = -J(222)
+    ai(222) = 0.0_c_double
+    ar(223) = -J(223)
+    ai(223) = 0.0_c_double
+    ar(224) = -J(224)
+    ai(224) = 0.0_c_double
+    ar(225) = -J(225)
+    ai(225) = 0.0_c_double
+    ar(226) = -J(226)
+    ai(226) = 0.0_c_double
+    ar(227) = -J(227)
+    ai(227) = 0.0_c_double
+    ar(228) = dr - J(228)
+    ai(228) = di
+    ar(229) = -J(229)
+    ai(229) = 0.0_c_double
+    ar(230) = -J(230)
+    ai(230) = 0.0_c_double
+    ar(231) = -J(231)
+    ai(231) = 0.0_c_double
+    ar(232) = -J(232)
+    ai(232) = 0.0_c_double
+    ar(233) = -J(233)
+    ai(233) = 0.0_c_double
+    ar(237) = -J(237)
+    ai(237) = 0.0_c_double
+    ar(238) = -J(238)
+    ai(238) = 0.0_c_double
+    ar(239) = -J(239)
+    ai(239) = 0.0_c_double
+    ar(240) = -J(240)
+    ai(240) = 0.0_c_double
+    ar(241) = -J(241)
+    ai(241) = 0.0_c_double
+    ar(242) = -J(242)
+    ai(242) = 0.0_c_double
+    ar(243) = -J(243)
+    ai(243) = 0.0_c_double
+    ar(244) = -J(244)
+    ai(244) = 0.0_c_double
+    ar(245) = -J(245)
+    ai(245) = 0.0_c_double
+    ar(246) = -J(246)
+    ai(246) = 0.0_c_double
+    ar(247) = dr - J(247)
+    ai(247) = di
+    ar(248) = -J(248)
+    ai(248) = 0.0_c_double
+    ar(249) = -J(249)
+    ai(249) = 0.0_c_double
+    ar(250) = -J(250)
+    ai(250) = 0.0_c_double
+    ar(251) = -J(251)
+    ai(251) = 0.0_c_double
+    ar(255) = -J(255)
+    ai(255) = 0.0_c_double
+    ar(256) = -J(256)
+    ai(256) = 0.0_c_double
+    ar(257) = -J(257)
+    ai(257) = 0.0_c_double
+    ar(258) = -J(258)
+    ai(258) = 0.0_c_double
+    ar(259) = -J(259)
+    ai(259) = 0.0_c_double
+    ar(260) = -J(260)
+    ai(260) = 0.0_c_double
+    ar(261) = -J(261)
+    ai(261) = 0.0_c_double
+    ar(262) = -J(262)
+    ai(262) = 0.0_c_double
+    ar(263) = -J(263)
+    ai(263) = 0.0_c_double
+    ar(264) = -J(264)
+    ai(264) = 0.0_c_double
+    ar(265) = -J(265)
+    ai(265) = 0.0_c_double
+    ar(266) = dr - J(266)
+    ai(266) = di
+    ar(267) = -J(267)
+    ai(267) = 0.0_c_double
+    ar(268) = -J(268)
+    ai(268) = 0.0_c_double
+    ar(269) = -J(269)
+    ai(269) = 0.0_c_double
+    ar(273) = -J(273)
+    ai(273) = 0.0_c_double
+    ar(274) = -J(274)
+    ai(274) = 0.0_c_double
+    ar(275) = -J(275)
+    ai(275) = 0.0_c_double
+    ar(276) = -J(276)
+    ai(276) = 0.0_c_double
+    ar(277) = -J(277)
+    ai(277) = 0.0_c_double
+    ar(278) = -J(278)
+    ai(278) = 0.0_c_double
+    ar(279) = -J(279)
+    ai(279) = 0.0_c_double
+    ar(280) = -J(280)
+    ai(280) = 0.0_c_double
+    ar(281) = -J(281)
+    ai(281) = 0.0_c_double
+    ar(282) = -J(282)
+    ai(282) = 0.0_c_double
+    ar(283) = -J(283)
+    ai(283) = 0.0_c_double
+    ar(284) = -J(284)
+    ai(284) = 0.0_c_double
+    ar(285) = dr - J(285)
+    ai(285) = di
+    ar(286) = -J(286)
+    ai(286) = 0.0_c_double
+    ar(287) = -J(287)
+    ai(287) = 0.0_c_double
+    ar(291) = -J(291)
+    ai(291) = 0.0_c_double
+    ar(292) = -J(292)
+    ai(292) = 0.0_c_double
+    ar(293) = -J(293)
+    ai(293) = 0.0_c_double
+    ar(294) = -J(294)
+    ai(294) = 0.0_c_double
+    ar(295) = -J(295)
+    ai(295) = 0.0_c_double
+    ar(296) = -J(296)
+    ai(296) = 0.0_c_double
+    ar(297) = -J(297)
+    ai(297) = 0.0_c_double
+    ar(298) = -J(298)
+    ai(298) = 0.0_c_double
+    ar(299) = -J(299)
+    ai(299) = 0.0_c_double
+    ar(300) = -J(300)
+    ai(300) = 0.0_c_double
+    ar(301) = -J(301)
+    ai(301) = 0.0_c_double
+    ar(302) = -J(302)
+    ai(302) = 0.0_c_double
+    ar(303) = -J(303)
+    ai(303) = 0.0_c_double
+    ar(304) = dr - J(304)
+    ai(304) = di
+    ar(305) = -J(305)
+    ai(305) = 0.0_c_double
+    ar(309) = -J(309)
+    ai(309) = 0.0_c_double
+    ar(310) = -J(310)
+    ai(310) = 0.0_c_double
+    ar(311) = -J(311)
+    ai(311) = 0.0_c_double
+    ar(312) = -J(312)
+    ai(312) = 0.0_c_double
+    ar(313) = -J(313)
+    ai(313) = 0.0_c_double
+    ar(314) = -J(314)
+    ai(314) = 0.0_c_double
+    ar(315) = -J(315)
+    ai(315) = 0.0_c_double
+    ar(316) = -J(316)
+    ai(316) = 0.0_c_double
+    ar(317) = -J(317)
+    ai(317) = 0.0_c_double
+    ar(318) = -J(318)
+    ai(318) = 0.0_c_double
+    ar(319) = -J(319)
+    ai(319) = 0.0_c_double
+    ar(320) = -J(320)
+    ai(320) = 0.0_c_double
+    ar(321) = -J(321)
+    ai(321) = 0.0_c_double
+    ar(322) = -J(322)
+    ai(322) = 0.0_c_double
+    ar(323) = dr - J(323)
+    ai(323) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 18), unrolled over the entries
   ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -1957,11 +2698,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(25)
+      a(25) = a(p * nx + 7)
+      a(p * nx + 7) = swap
+      swap = a(26)
+      a(26) = a(p * nx + 8)
+      a(p * nx + 8) = swap
+      swap = a(27)
+      a(27) = a(p * nx + 9)
+      a(p * nx + 9) = swap
     end if
     a(19) = 1.0_c_double / a(19)
     do i = 2, 3 - 1
@@ -1997,7 +2747,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(3 * nx + j)
         a(3 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2048,7 +2798,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(4 * nx + j)
         a(4 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2097,7 +2847,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(5 * nx + j)
         a(5 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2144,7 +2894,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(6 * nx + j)
         a(6 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2189,7 +2939,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(7 * nx + j)
         a(7 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2232,7 +2982,7 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(8 * nx + j)
         a(8 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2273,7 +3023,7 @@ contains
       return
     end if
     if (p /= 9) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(9 * nx + j)
         a(9 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2312,7 +3062,7 @@ contains
       return
     end if
     if (p /= 10) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(10 * nx + j)
         a(10 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2349,7 +3099,7 @@ contains
       return
     end if
     if (p /= 11) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(11 * nx + j)
         a(11 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2384,7 +3134,7 @@ contains
       return
     end if
     if (p /= 12) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(12 * nx + j)
         a(12 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2417,7 +3167,7 @@ contains
       return
     end if
     if (p /= 13) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(13 * nx + j)
         a(13 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2448,7 +3198,7 @@ contains
       return
     end if
     if (p /= 14) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(14 * nx + j)
         a(14 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2477,7 +3227,7 @@ contains
       return
     end if
     if (p /= 15) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(15 * nx + j)
         a(15 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2504,7 +3254,7 @@ contains
       return
     end if
     if (p /= 16) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = a(16 * nx + j)
         a(16 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -2747,7 +3497,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2755,6 +3505,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(25)
+      ar(25) = ar(p * nx + 7)
+      ar(p * nx + 7) = swap
+      swap = ai(25)
+      ai(25) = ai(p * nx + 7)
+      ai(p * nx + 7) = swap
+      swap = ar(26)
+      ar(26) = ar(p * nx + 8)
+      ar(p * nx + 8) = swap
+      swap = ai(26)
+      ai(26) = ai(p * nx + 8)
+      ai(p * nx + 8) = swap
+      swap = ar(27)
+      ar(27) = ar(p * nx + 9)
+      ar(p * nx + 9) = swap
+      swap = ai(27)
+      ai(27) = ai(p * nx + 9)
+      ai(p * nx + 9) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(19)
@@ -2852,7 +3620,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(3 * nx + j)
         ar(3 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3006,7 +3774,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(4 * nx + j)
         ar(4 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3152,7 +3920,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(5 * nx + j)
         ar(5 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3290,7 +4058,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(6 * nx + j)
         ar(6 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3420,7 +4188,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(7 * nx + j)
         ar(7 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3542,7 +4310,7 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(8 * nx + j)
         ar(8 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3656,7 +4424,7 @@ contains
       return
     end if
     if (p /= 9) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(9 * nx + j)
         ar(9 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3762,7 +4530,7 @@ contains
       return
     end if
     if (p /= 10) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(10 * nx + j)
         ar(10 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3860,7 +4628,7 @@ contains
       return
     end if
     if (p /= 11) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(11 * nx + j)
         ar(11 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3950,7 +4718,7 @@ contains
       return
     end if
     if (p /= 12) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(12 * nx + j)
         ar(12 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -4032,7 +4800,7 @@ contains
       return
     end if
     if (p /= 13) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(13 * nx + j)
         ar(13 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -4106,7 +4874,7 @@ contains
       return
     end if
     if (p /= 14) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(14 * nx + j)
         ar(14 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -4172,7 +4940,7 @@ contains
       return
     end if
     if (p /= 15) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(15 * nx + j)
         ar(15 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -4230,7 +4998,7 @@ contains
       return
     end if
     if (p /= 16) then
-      do j = 3, nx - 1
+      do j = 3, 18 - 1
         swap = ar(16 * nx + j)
         ar(16 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -6297,12 +7065,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -6475,12 +7238,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -6654,23 +7412,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return

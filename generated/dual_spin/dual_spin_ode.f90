@@ -564,6 +564,111 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(3) = -J(3)
+    a(5) = -J(5)
+    a(8) = d - J(8)
+    a(9) = -J(9)
+    a(10) = -J(10)
+    a(11) = -J(11)
+    a(12) = -J(12)
+    a(15) = -J(15)
+    a(16) = d - J(16)
+    a(17) = -J(17)
+    a(18) = -J(18)
+    a(19) = -J(19)
+    a(24) = d - J(24)
+    a(25) = -J(25)
+    a(26) = -J(26)
+    a(27) = -J(27)
+    a(31) = -J(31)
+    a(32) = d - J(32)
+    a(33) = -J(33)
+    a(34) = -J(34)
+    a(38) = -J(38)
+    a(39) = -J(39)
+    a(40) = d - J(40)
+    a(41) = -J(41)
+    a(48) = d - J(48)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(3) = -J(3)
+    ai(3) = 0.0_c_double
+    ar(5) = -J(5)
+    ai(5) = 0.0_c_double
+    ar(8) = dr - J(8)
+    ai(8) = di
+    ar(9) = -J(9)
+    ai(9) = 0.0_c_double
+    ar(10) = -J(10)
+    ai(10) = 0.0_c_double
+    ar(11) = -J(11)
+    ai(11) = 0.0_c_double
+    ar(12) = -J(12)
+    ai(12) = 0.0_c_double
+    ar(15) = -J(15)
+    ai(15) = 0.0_c_double
+    ar(16) = dr - J(16)
+    ai(16) = di
+    ar(17) = -J(17)
+    ai(17) = 0.0_c_double
+    ar(18) = -J(18)
+    ai(18) = 0.0_c_double
+    ar(19) = -J(19)
+    ai(19) = 0.0_c_double
+    ar(24) = dr - J(24)
+    ai(24) = di
+    ar(25) = -J(25)
+    ai(25) = 0.0_c_double
+    ar(26) = -J(26)
+    ai(26) = 0.0_c_double
+    ar(27) = -J(27)
+    ai(27) = 0.0_c_double
+    ar(31) = -J(31)
+    ai(31) = 0.0_c_double
+    ar(32) = dr - J(32)
+    ai(32) = di
+    ar(33) = -J(33)
+    ai(33) = 0.0_c_double
+    ar(34) = -J(34)
+    ai(34) = 0.0_c_double
+    ar(38) = -J(38)
+    ai(38) = 0.0_c_double
+    ar(39) = -J(39)
+    ai(39) = 0.0_c_double
+    ar(40) = dr - J(40)
+    ai(40) = di
+    ar(41) = -J(41)
+    ai(41) = 0.0_c_double
+    ar(48) = dr - J(48)
+    ai(48) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 6), (6, 7), unrolled over the entries
   ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -600,11 +705,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(10)
+      a(10) = a(p * nx + 3)
+      a(p * nx + 3) = swap
+      swap = a(11)
+      a(11) = a(p * nx + 4)
+      a(p * nx + 4) = swap
+      swap = a(12)
+      a(12) = a(p * nx + 5)
+      a(p * nx + 5) = swap
     end if
     a(8) = 1.0_c_double / a(8)
     do i = 2, 3 - 1
@@ -640,11 +754,14 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 6 - 1
         swap = a(3 * nx + j)
         a(3 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(27)
+      a(27) = a(p * nx + 6)
+      a(p * nx + 6) = swap
     end if
     a(24) = 1.0_c_double / a(24)
     do i = 4, 6 - 1
@@ -669,11 +786,14 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 6 - 1
         swap = a(4 * nx + j)
         a(4 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(34)
+      a(34) = a(p * nx + 6)
+      a(p * nx + 6) = swap
     end if
     a(32) = 1.0_c_double / a(32)
     do i = 5, 6 - 1
@@ -804,7 +924,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -812,6 +932,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(10)
+      ar(10) = ar(p * nx + 3)
+      ar(p * nx + 3) = swap
+      swap = ai(10)
+      ai(10) = ai(p * nx + 3)
+      ai(p * nx + 3) = swap
+      swap = ar(11)
+      ar(11) = ar(p * nx + 4)
+      ar(p * nx + 4) = swap
+      swap = ai(11)
+      ai(11) = ai(p * nx + 4)
+      ai(p * nx + 4) = swap
+      swap = ar(12)
+      ar(12) = ar(p * nx + 5)
+      ar(p * nx + 5) = swap
+      swap = ai(12)
+      ai(12) = ai(p * nx + 5)
+      ai(p * nx + 5) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(8)
@@ -909,7 +1047,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 6 - 1
         swap = ar(3 * nx + j)
         ar(3 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -917,6 +1055,12 @@ contains
         ai(3 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(27)
+      ar(27) = ar(p * nx + 6)
+      ar(p * nx + 6) = swap
+      swap = ai(27)
+      ai(27) = ai(p * nx + 6)
+      ai(p * nx + 6) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(24)
@@ -975,7 +1119,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 6 - 1
         swap = ar(4 * nx + j)
         ar(4 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -983,6 +1127,12 @@ contains
         ai(4 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(34)
+      ar(34) = ar(p * nx + 6)
+      ar(p * nx + 6) = swap
+      swap = ai(34)
+      ai(34) = ai(p * nx + 6)
+      ai(p * nx + 6) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(32)
@@ -2739,12 +2889,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -2917,12 +3062,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3096,23 +3236,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return

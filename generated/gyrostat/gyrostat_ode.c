@@ -612,6 +612,140 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *GYROSTAT_RESTRICT J, double d, double *GYROSTAT_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[7] = -J[7];
+    a[9] = -J[9];
+    a[15] = d - J[15];
+    a[16] = -J[16];
+    a[21] = -J[21];
+    a[22] = -J[22];
+    a[23] = -J[23];
+    a[29] = -J[29];
+    a[30] = d - J[30];
+    a[35] = -J[35];
+    a[36] = -J[36];
+    a[37] = -J[37];
+    a[45] = d - J[45];
+    a[50] = -J[50];
+    a[52] = -J[52];
+    a[60] = d - J[60];
+    a[67] = -J[67];
+    a[75] = d - J[75];
+    a[82] = -J[82];
+    a[90] = d - J[90];
+    a[97] = -J[97];
+    a[105] = d - J[105];
+    a[106] = -J[106];
+    a[107] = -J[107];
+    a[108] = -J[108];
+    a[119] = -J[119];
+    a[120] = d - J[120];
+    a[121] = -J[121];
+    a[122] = -J[122];
+    a[133] = -J[133];
+    a[134] = -J[134];
+    a[135] = d - J[135];
+    a[136] = -J[136];
+    a[150] = d - J[150];
+    a[165] = d - J[165];
+    a[180] = d - J[180];
+    a[195] = d - J[195];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *GYROSTAT_RESTRICT J, double dr, double di,
+                             double *GYROSTAT_RESTRICT ar, double *GYROSTAT_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[7] = -J[7];
+    ai[7] = 0.0;
+    ar[9] = -J[9];
+    ai[9] = 0.0;
+    ar[15] = dr - J[15];
+    ai[15] = di;
+    ar[16] = -J[16];
+    ai[16] = 0.0;
+    ar[21] = -J[21];
+    ai[21] = 0.0;
+    ar[22] = -J[22];
+    ai[22] = 0.0;
+    ar[23] = -J[23];
+    ai[23] = 0.0;
+    ar[29] = -J[29];
+    ai[29] = 0.0;
+    ar[30] = dr - J[30];
+    ai[30] = di;
+    ar[35] = -J[35];
+    ai[35] = 0.0;
+    ar[36] = -J[36];
+    ai[36] = 0.0;
+    ar[37] = -J[37];
+    ai[37] = 0.0;
+    ar[45] = dr - J[45];
+    ai[45] = di;
+    ar[50] = -J[50];
+    ai[50] = 0.0;
+    ar[52] = -J[52];
+    ai[52] = 0.0;
+    ar[60] = dr - J[60];
+    ai[60] = di;
+    ar[67] = -J[67];
+    ai[67] = 0.0;
+    ar[75] = dr - J[75];
+    ai[75] = di;
+    ar[82] = -J[82];
+    ai[82] = 0.0;
+    ar[90] = dr - J[90];
+    ai[90] = di;
+    ar[97] = -J[97];
+    ai[97] = 0.0;
+    ar[105] = dr - J[105];
+    ai[105] = di;
+    ar[106] = -J[106];
+    ai[106] = 0.0;
+    ar[107] = -J[107];
+    ai[107] = 0.0;
+    ar[108] = -J[108];
+    ai[108] = 0.0;
+    ar[119] = -J[119];
+    ai[119] = 0.0;
+    ar[120] = dr - J[120];
+    ai[120] = di;
+    ar[121] = -J[121];
+    ai[121] = 0.0;
+    ar[122] = -J[122];
+    ai[122] = 0.0;
+    ar[133] = -J[133];
+    ai[133] = 0.0;
+    ar[134] = -J[134];
+    ai[134] = 0.0;
+    ar[135] = dr - J[135];
+    ai[135] = di;
+    ar[136] = -J[136];
+    ai[136] = 0.0;
+    ar[150] = dr - J[150];
+    ai[150] = di;
+    ar[165] = dr - J[165];
+    ai[165] = di;
+    ar[180] = dr - J[180];
+    ai[180] = di;
+    ar[195] = dr - J[195];
+    ai[195] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11),
    (11, 12), (12, 13), (13, 14), unrolled over the entries
@@ -645,11 +779,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < GYROSTAT_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * GYROSTAT_NX + j];
             a[1 * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
             a[p * GYROSTAT_NX + j] = swap;
         }
+        swap = a[21];
+        a[21] = a[p * GYROSTAT_NX + 7];
+        a[p * GYROSTAT_NX + 7] = swap;
+        swap = a[22];
+        a[22] = a[p * GYROSTAT_NX + 8];
+        a[p * GYROSTAT_NX + 8] = swap;
+        swap = a[23];
+        a[23] = a[p * GYROSTAT_NX + 9];
+        a[p * GYROSTAT_NX + 9] = swap;
     }
     a[15] = 1.0 / a[15];
     for (i = 2; i < 3; ++i) {
@@ -708,11 +851,14 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 7; j < GYROSTAT_NX; ++j) {
+        for (j = 7; j < 10; ++j) {
             swap = a[7 * GYROSTAT_NX + j];
             a[7 * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
             a[p * GYROSTAT_NX + j] = swap;
         }
+        swap = a[108];
+        a[108] = a[p * GYROSTAT_NX + 10];
+        a[p * GYROSTAT_NX + 10] = swap;
     }
     a[105] = 1.0 / a[105];
     for (i = 8; i < 10; ++i) {
@@ -736,11 +882,14 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 7; j < GYROSTAT_NX; ++j) {
+        for (j = 7; j < 10; ++j) {
             swap = a[8 * GYROSTAT_NX + j];
             a[8 * GYROSTAT_NX + j] = a[p * GYROSTAT_NX + j];
             a[p * GYROSTAT_NX + j] = swap;
         }
+        swap = a[122];
+        a[122] = a[p * GYROSTAT_NX + 10];
+        a[p * GYROSTAT_NX + 10] = swap;
     }
     a[120] = 1.0 / a[120];
     for (i = 9; i < 10; ++i) {
@@ -885,7 +1034,7 @@ static int lu_decompose_complex(double *GYROSTAT_RESTRICT ar, double *GYROSTAT_R
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < GYROSTAT_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * GYROSTAT_NX + j];
             ar[1 * GYROSTAT_NX + j] = ar[p * GYROSTAT_NX + j];
             ar[p * GYROSTAT_NX + j] = swap;
@@ -893,6 +1042,24 @@ static int lu_decompose_complex(double *GYROSTAT_RESTRICT ar, double *GYROSTAT_R
             ai[1 * GYROSTAT_NX + j] = ai[p * GYROSTAT_NX + j];
             ai[p * GYROSTAT_NX + j] = swap;
         }
+        swap = ar[21];
+        ar[21] = ar[p * GYROSTAT_NX + 7];
+        ar[p * GYROSTAT_NX + 7] = swap;
+        swap = ai[21];
+        ai[21] = ai[p * GYROSTAT_NX + 7];
+        ai[p * GYROSTAT_NX + 7] = swap;
+        swap = ar[22];
+        ar[22] = ar[p * GYROSTAT_NX + 8];
+        ar[p * GYROSTAT_NX + 8] = swap;
+        swap = ai[22];
+        ai[22] = ai[p * GYROSTAT_NX + 8];
+        ai[p * GYROSTAT_NX + 8] = swap;
+        swap = ar[23];
+        ar[23] = ar[p * GYROSTAT_NX + 9];
+        ar[p * GYROSTAT_NX + 9] = swap;
+        swap = ai[23];
+        ai[23] = ai[p * GYROSTAT_NX + 9];
+        ai[p * GYROSTAT_NX + 9] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[15];
@@ -1080,7 +1247,7 @@ static int lu_decompose_complex(double *GYROSTAT_RESTRICT ar, double *GYROSTAT_R
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 7; j < GYROSTAT_NX; ++j) {
+        for (j = 7; j < 10; ++j) {
             swap = ar[7 * GYROSTAT_NX + j];
             ar[7 * GYROSTAT_NX + j] = ar[p * GYROSTAT_NX + j];
             ar[p * GYROSTAT_NX + j] = swap;
@@ -1088,6 +1255,12 @@ static int lu_decompose_complex(double *GYROSTAT_RESTRICT ar, double *GYROSTAT_R
             ai[7 * GYROSTAT_NX + j] = ai[p * GYROSTAT_NX + j];
             ai[p * GYROSTAT_NX + j] = swap;
         }
+        swap = ar[108];
+        ar[108] = ar[p * GYROSTAT_NX + 10];
+        ar[p * GYROSTAT_NX + 10] = swap;
+        swap = ai[108];
+        ai[108] = ai[p * GYROSTAT_NX + 10];
+        ai[p * GYROSTAT_NX + 10] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[105];
@@ -1145,7 +1318,7 @@ static int lu_decompose_complex(double *GYROSTAT_RESTRICT ar, double *GYROSTAT_R
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 7; j < GYROSTAT_NX; ++j) {
+        for (j = 7; j < 10; ++j) {
             swap = ar[8 * GYROSTAT_NX + j];
             ar[8 * GYROSTAT_NX + j] = ar[p * GYROSTAT_NX + j];
             ar[p * GYROSTAT_NX + j] = swap;
@@ -1153,6 +1326,12 @@ static int lu_decompose_complex(double *GYROSTAT_RESTRICT ar, double *GYROSTAT_R
             ai[8 * GYROSTAT_NX + j] = ai[p * GYROSTAT_NX + j];
             ai[p * GYROSTAT_NX + j] = swap;
         }
+        swap = ar[122];
+        ar[122] = ar[p * GYROSTAT_NX + 10];
+        ar[p * GYROSTAT_NX + 10] = swap;
+        swap = ai[122];
+        ai[122] = ai[p * GYROSTAT_NX + 10];
+        ai[p * GYROSTAT_NX + 10] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[120];
@@ -6419,12 +6598,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < GYROSTAT_NX; ++i) {
-            lu[i * GYROSTAT_NX + i] = lu[i * GYROSTAT_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6581,12 +6755,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < GYROSTAT_NX; ++i) {
-            lu[i * GYROSTAT_NX + i] = lu[i * GYROSTAT_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6723,23 +6892,8 @@ size_t gyrostat_rodas4_grid_batch(size_t n, long ntimes, const double *times, do
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < GYROSTAT_NX; ++i) {
-        e1[i * GYROSTAT_NX + i] = e1[i * GYROSTAT_NX + i] + gamma_h;
-        e2r[i * GYROSTAT_NX + i] = e2r[i * GYROSTAT_NX + i] + alpha_h;
-        e2i[i * GYROSTAT_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }

@@ -571,6 +571,147 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(7) = -J(7)
+    a(9) = -J(9)
+    a(15) = d - J(15)
+    a(16) = -J(16)
+    a(21) = -J(21)
+    a(22) = -J(22)
+    a(23) = -J(23)
+    a(29) = -J(29)
+    a(30) = d - J(30)
+    a(35) = -J(35)
+    a(36) = -J(36)
+    a(37) = -J(37)
+    a(45) = d - J(45)
+    a(50) = -J(50)
+    a(52) = -J(52)
+    a(60) = d - J(60)
+    a(67) = -J(67)
+    a(75) = d - J(75)
+    a(82) = -J(82)
+    a(90) = d - J(90)
+    a(97) = -J(97)
+    a(105) = d - J(105)
+    a(106) = -J(106)
+    a(107) = -J(107)
+    a(108) = -J(108)
+    a(119) = -J(119)
+    a(120) = d - J(120)
+    a(121) = -J(121)
+    a(122) = -J(122)
+    a(133) = -J(133)
+    a(134) = -J(134)
+    a(135) = d - J(135)
+    a(136) = -J(136)
+    a(150) = d - J(150)
+    a(165) = d - J(165)
+    a(180) = d - J(180)
+    a(195) = d - J(195)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(7) = -J(7)
+    ai(7) = 0.0_c_double
+    ar(9) = -J(9)
+    ai(9) = 0.0_c_double
+    ar(15) = dr - J(15)
+    ai(15) = di
+    ar(16) = -J(16)
+    ai(16) = 0.0_c_double
+    ar(21) = -J(21)
+    ai(21) = 0.0_c_double
+    ar(22) = -J(22)
+    ai(22) = 0.0_c_double
+    ar(23) = -J(23)
+    ai(23) = 0.0_c_double
+    ar(29) = -J(29)
+    ai(29) = 0.0_c_double
+    ar(30) = dr - J(30)
+    ai(30) = di
+    ar(35) = -J(35)
+    ai(35) = 0.0_c_double
+    ar(36) = -J(36)
+    ai(36) = 0.0_c_double
+    ar(37) = -J(37)
+    ai(37) = 0.0_c_double
+    ar(45) = dr - J(45)
+    ai(45) = di
+    ar(50) = -J(50)
+    ai(50) = 0.0_c_double
+    ar(52) = -J(52)
+    ai(52) = 0.0_c_double
+    ar(60) = dr - J(60)
+    ai(60) = di
+    ar(67) = -J(67)
+    ai(67) = 0.0_c_double
+    ar(75) = dr - J(75)
+    ai(75) = di
+    ar(82) = -J(82)
+    ai(82) = 0.0_c_double
+    ar(90) = dr - J(90)
+    ai(90) = di
+    ar(97) = -J(97)
+    ai(97) = 0.0_c_double
+    ar(105) = dr - J(105)
+    ai(105) = di
+    ar(106) = -J(106)
+    ai(106) = 0.0_c_double
+    ar(107) = -J(107)
+    ai(107) = 0.0_c_double
+    ar(108) = -J(108)
+    ai(108) = 0.0_c_double
+    ar(119) = -J(119)
+    ai(119) = 0.0_c_double
+    ar(120) = dr - J(120)
+    ai(120) = di
+    ar(121) = -J(121)
+    ai(121) = 0.0_c_double
+    ar(122) = -J(122)
+    ai(122) = 0.0_c_double
+    ar(133) = -J(133)
+    ai(133) = 0.0_c_double
+    ar(134) = -J(134)
+    ai(134) = 0.0_c_double
+    ar(135) = dr - J(135)
+    ai(135) = di
+    ar(136) = -J(136)
+    ai(136) = 0.0_c_double
+    ar(150) = dr - J(150)
+    ai(150) = di
+    ar(165) = dr - J(165)
+    ai(165) = di
+    ar(180) = dr - J(180)
+    ai(180) = di
+    ar(195) = dr - J(195)
+    ai(195) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 4), (4, 5), (5, 6), (6, 7), (7, 10), (10, 11),
   ! (11, 12), (12, 13), (13, 14), unrolled over the entries
@@ -608,11 +749,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(21)
+      a(21) = a(p * nx + 7)
+      a(p * nx + 7) = swap
+      swap = a(22)
+      a(22) = a(p * nx + 8)
+      a(p * nx + 8) = swap
+      swap = a(23)
+      a(23) = a(p * nx + 9)
+      a(p * nx + 9) = swap
     end if
     a(15) = 1.0_c_double / a(15)
     do i = 2, 3 - 1
@@ -677,11 +827,14 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 7, nx - 1
+      do j = 7, 10 - 1
         swap = a(7 * nx + j)
         a(7 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(108)
+      a(108) = a(p * nx + 10)
+      a(p * nx + 10) = swap
     end if
     a(105) = 1.0_c_double / a(105)
     do i = 8, 10 - 1
@@ -706,11 +859,14 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 7, nx - 1
+      do j = 7, 10 - 1
         swap = a(8 * nx + j)
         a(8 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(122)
+      a(122) = a(p * nx + 10)
+      a(p * nx + 10) = swap
     end if
     a(120) = 1.0_c_double / a(120)
     do i = 9, 10 - 1
@@ -866,7 +1022,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -874,6 +1030,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(21)
+      ar(21) = ar(p * nx + 7)
+      ar(p * nx + 7) = swap
+      swap = ai(21)
+      ai(21) = ai(p * nx + 7)
+      ai(p * nx + 7) = swap
+      swap = ar(22)
+      ar(22) = ar(p * nx + 8)
+      ar(p * nx + 8) = swap
+      swap = ai(22)
+      ai(22) = ai(p * nx + 8)
+      ai(p * nx + 8) = swap
+      swap = ar(23)
+      ar(23) = ar(p * nx + 9)
+      ar(p * nx + 9) = swap
+      swap = ai(23)
+      ai(23) = ai(p * nx + 9)
+      ai(p * nx + 9) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(15)
@@ -1067,7 +1241,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 7, nx - 1
+      do j = 7, 10 - 1
         swap = ar(7 * nx + j)
         ar(7 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1075,6 +1249,12 @@ contains
         ai(7 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(108)
+      ar(108) = ar(p * nx + 10)
+      ar(p * nx + 10) = swap
+      swap = ai(108)
+      ai(108) = ai(p * nx + 10)
+      ai(p * nx + 10) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(105)
@@ -1133,7 +1313,7 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 7, nx - 1
+      do j = 7, 10 - 1
         swap = ar(8 * nx + j)
         ar(8 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1141,6 +1321,12 @@ contains
         ai(8 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(122)
+      ar(122) = ar(p * nx + 10)
+      ar(p * nx + 10) = swap
+      swap = ai(122)
+      ai(122) = ai(p * nx + 10)
+      ai(p * nx + 10) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(120)
@@ -2981,12 +3167,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3159,12 +3340,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3338,23 +3514,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return

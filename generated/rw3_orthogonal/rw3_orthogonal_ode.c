@@ -638,6 +638,174 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *RW3_ORTHOGONAL_RESTRICT J, double d,
+                     double *RW3_ORTHOGONAL_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[3] = -J[3];
+    a[5] = -J[5];
+    a[10] = d - J[10];
+    a[11] = -J[11];
+    a[12] = -J[12];
+    a[13] = -J[13];
+    a[14] = -J[14];
+    a[19] = -J[19];
+    a[20] = d - J[20];
+    a[21] = -J[21];
+    a[22] = -J[22];
+    a[23] = -J[23];
+    a[30] = d - J[30];
+    a[31] = -J[31];
+    a[32] = -J[32];
+    a[33] = -J[33];
+    a[34] = -J[34];
+    a[35] = -J[35];
+    a[39] = -J[39];
+    a[40] = d - J[40];
+    a[41] = -J[41];
+    a[42] = -J[42];
+    a[43] = -J[43];
+    a[44] = -J[44];
+    a[48] = -J[48];
+    a[49] = -J[49];
+    a[50] = d - J[50];
+    a[51] = -J[51];
+    a[52] = -J[52];
+    a[53] = -J[53];
+    a[57] = -J[57];
+    a[58] = -J[58];
+    a[59] = -J[59];
+    a[60] = d - J[60];
+    a[61] = -J[61];
+    a[62] = -J[62];
+    a[66] = -J[66];
+    a[67] = -J[67];
+    a[68] = -J[68];
+    a[69] = -J[69];
+    a[70] = d - J[70];
+    a[71] = -J[71];
+    a[75] = -J[75];
+    a[76] = -J[76];
+    a[77] = -J[77];
+    a[78] = -J[78];
+    a[79] = -J[79];
+    a[80] = d - J[80];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *RW3_ORTHOGONAL_RESTRICT J, double dr, double di,
+                             double *RW3_ORTHOGONAL_RESTRICT ar, double *RW3_ORTHOGONAL_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[3] = -J[3];
+    ai[3] = 0.0;
+    ar[5] = -J[5];
+    ai[5] = 0.0;
+    ar[10] = dr - J[10];
+    ai[10] = di;
+    ar[11] = -J[11];
+    ai[11] = 0.0;
+    ar[12] = -J[12];
+    ai[12] = 0.0;
+    ar[13] = -J[13];
+    ai[13] = 0.0;
+    ar[14] = -J[14];
+    ai[14] = 0.0;
+    ar[19] = -J[19];
+    ai[19] = 0.0;
+    ar[20] = dr - J[20];
+    ai[20] = di;
+    ar[21] = -J[21];
+    ai[21] = 0.0;
+    ar[22] = -J[22];
+    ai[22] = 0.0;
+    ar[23] = -J[23];
+    ai[23] = 0.0;
+    ar[30] = dr - J[30];
+    ai[30] = di;
+    ar[31] = -J[31];
+    ai[31] = 0.0;
+    ar[32] = -J[32];
+    ai[32] = 0.0;
+    ar[33] = -J[33];
+    ai[33] = 0.0;
+    ar[34] = -J[34];
+    ai[34] = 0.0;
+    ar[35] = -J[35];
+    ai[35] = 0.0;
+    ar[39] = -J[39];
+    ai[39] = 0.0;
+    ar[40] = dr - J[40];
+    ai[40] = di;
+    ar[41] = -J[41];
+    ai[41] = 0.0;
+    ar[42] = -J[42];
+    ai[42] = 0.0;
+    ar[43] = -J[43];
+    ai[43] = 0.0;
+    ar[44] = -J[44];
+    ai[44] = 0.0;
+    ar[48] = -J[48];
+    ai[48] = 0.0;
+    ar[49] = -J[49];
+    ai[49] = 0.0;
+    ar[50] = dr - J[50];
+    ai[50] = di;
+    ar[51] = -J[51];
+    ai[51] = 0.0;
+    ar[52] = -J[52];
+    ai[52] = 0.0;
+    ar[53] = -J[53];
+    ai[53] = 0.0;
+    ar[57] = -J[57];
+    ai[57] = 0.0;
+    ar[58] = -J[58];
+    ai[58] = 0.0;
+    ar[59] = -J[59];
+    ai[59] = 0.0;
+    ar[60] = dr - J[60];
+    ai[60] = di;
+    ar[61] = -J[61];
+    ai[61] = 0.0;
+    ar[62] = -J[62];
+    ai[62] = 0.0;
+    ar[66] = -J[66];
+    ai[66] = 0.0;
+    ar[67] = -J[67];
+    ai[67] = 0.0;
+    ar[68] = -J[68];
+    ai[68] = 0.0;
+    ar[69] = -J[69];
+    ai[69] = 0.0;
+    ar[70] = dr - J[70];
+    ai[70] = di;
+    ar[71] = -J[71];
+    ai[71] = 0.0;
+    ar[75] = -J[75];
+    ai[75] = 0.0;
+    ar[76] = -J[76];
+    ai[76] = 0.0;
+    ar[77] = -J[77];
+    ai[77] = 0.0;
+    ar[78] = -J[78];
+    ai[78] = 0.0;
+    ar[79] = -J[79];
+    ai[79] = 0.0;
+    ar[80] = dr - J[80];
+    ai[80] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 9), unrolled over the entries
    of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -670,11 +838,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * RW3_ORTHOGONAL_NX + j];
             a[1 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
             a[p * RW3_ORTHOGONAL_NX + j] = swap;
         }
+        swap = a[12];
+        a[12] = a[p * RW3_ORTHOGONAL_NX + 3];
+        a[p * RW3_ORTHOGONAL_NX + 3] = swap;
+        swap = a[13];
+        a[13] = a[p * RW3_ORTHOGONAL_NX + 4];
+        a[p * RW3_ORTHOGONAL_NX + 4] = swap;
+        swap = a[14];
+        a[14] = a[p * RW3_ORTHOGONAL_NX + 5];
+        a[p * RW3_ORTHOGONAL_NX + 5] = swap;
     }
     a[10] = 1.0 / a[10];
     for (i = 2; i < 3; ++i) {
@@ -708,7 +885,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = a[3 * RW3_ORTHOGONAL_NX + j];
             a[3 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
             a[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -740,7 +917,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = a[4 * RW3_ORTHOGONAL_NX + j];
             a[4 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
             a[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -770,7 +947,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = a[5 * RW3_ORTHOGONAL_NX + j];
             a[5 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
             a[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -798,7 +975,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = a[6 * RW3_ORTHOGONAL_NX + j];
             a[6 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
             a[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -824,7 +1001,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = a[7 * RW3_ORTHOGONAL_NX + j];
             a[7 * RW3_ORTHOGONAL_NX + j] = a[p * RW3_ORTHOGONAL_NX + j];
             a[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -965,7 +1142,7 @@ static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * RW3_ORTHOGONAL_NX + j];
             ar[1 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
             ar[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -973,6 +1150,24 @@ static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
             ai[1 * RW3_ORTHOGONAL_NX + j] = ai[p * RW3_ORTHOGONAL_NX + j];
             ai[p * RW3_ORTHOGONAL_NX + j] = swap;
         }
+        swap = ar[12];
+        ar[12] = ar[p * RW3_ORTHOGONAL_NX + 3];
+        ar[p * RW3_ORTHOGONAL_NX + 3] = swap;
+        swap = ai[12];
+        ai[12] = ai[p * RW3_ORTHOGONAL_NX + 3];
+        ai[p * RW3_ORTHOGONAL_NX + 3] = swap;
+        swap = ar[13];
+        ar[13] = ar[p * RW3_ORTHOGONAL_NX + 4];
+        ar[p * RW3_ORTHOGONAL_NX + 4] = swap;
+        swap = ai[13];
+        ai[13] = ai[p * RW3_ORTHOGONAL_NX + 4];
+        ai[p * RW3_ORTHOGONAL_NX + 4] = swap;
+        swap = ar[14];
+        ar[14] = ar[p * RW3_ORTHOGONAL_NX + 5];
+        ar[p * RW3_ORTHOGONAL_NX + 5] = swap;
+        swap = ai[14];
+        ai[14] = ai[p * RW3_ORTHOGONAL_NX + 5];
+        ai[p * RW3_ORTHOGONAL_NX + 5] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[10];
@@ -1068,7 +1263,7 @@ static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = ar[3 * RW3_ORTHOGONAL_NX + j];
             ar[3 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
             ar[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -1149,7 +1344,7 @@ static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = ar[4 * RW3_ORTHOGONAL_NX + j];
             ar[4 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
             ar[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -1222,7 +1417,7 @@ static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = ar[5 * RW3_ORTHOGONAL_NX + j];
             ar[5 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
             ar[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -1287,7 +1482,7 @@ static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = ar[6 * RW3_ORTHOGONAL_NX + j];
             ar[6 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
             ar[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -1344,7 +1539,7 @@ static int lu_decompose_complex(double *RW3_ORTHOGONAL_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < RW3_ORTHOGONAL_NX; ++j) {
+        for (j = 3; j < 9; ++j) {
             swap = ar[7 * RW3_ORTHOGONAL_NX + j];
             ar[7 * RW3_ORTHOGONAL_NX + j] = ar[p * RW3_ORTHOGONAL_NX + j];
             ar[p * RW3_ORTHOGONAL_NX + j] = swap;
@@ -6477,12 +6672,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-            lu[i * RW3_ORTHOGONAL_NX + i] = lu[i * RW3_ORTHOGONAL_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6640,12 +6830,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-            lu[i * RW3_ORTHOGONAL_NX + i] = lu[i * RW3_ORTHOGONAL_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6783,23 +6968,8 @@ size_t rw3_orthogonal_rodas4_grid_batch(size_t n, long ntimes, const double *tim
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
-        e1[i * RW3_ORTHOGONAL_NX + i] = e1[i * RW3_ORTHOGONAL_NX + i] + gamma_h;
-        e2r[i * RW3_ORTHOGONAL_NX + i] = e2r[i * RW3_ORTHOGONAL_NX + i] + alpha_h;
-        e2i[i * RW3_ORTHOGONAL_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }

@@ -606,6 +606,180 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(3) = -J(3)
+    a(5) = -J(5)
+    a(10) = d - J(10)
+    a(11) = -J(11)
+    a(12) = -J(12)
+    a(13) = -J(13)
+    a(14) = -J(14)
+    a(19) = -J(19)
+    a(20) = d - J(20)
+    a(21) = -J(21)
+    a(22) = -J(22)
+    a(23) = -J(23)
+    a(30) = d - J(30)
+    a(31) = -J(31)
+    a(32) = -J(32)
+    a(33) = -J(33)
+    a(34) = -J(34)
+    a(35) = -J(35)
+    a(39) = -J(39)
+    a(40) = d - J(40)
+    a(41) = -J(41)
+    a(42) = -J(42)
+    a(43) = -J(43)
+    a(44) = -J(44)
+    a(48) = -J(48)
+    a(49) = -J(49)
+    a(50) = d - J(50)
+    a(51) = -J(51)
+    a(52) = -J(52)
+    a(53) = -J(53)
+    a(57) = -J(57)
+    a(58) = -J(58)
+    a(59) = -J(59)
+    a(60) = d - J(60)
+    a(61) = -J(61)
+    a(62) = -J(62)
+    a(66) = -J(66)
+    a(67) = -J(67)
+    a(68) = -J(68)
+    a(69) = -J(69)
+    a(70) = d - J(70)
+    a(71) = -J(71)
+    a(75) = -J(75)
+    a(76) = -J(76)
+    a(77) = -J(77)
+    a(78) = -J(78)
+    a(79) = -J(79)
+    a(80) = d - J(80)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(3) = -J(3)
+    ai(3) = 0.0_c_double
+    ar(5) = -J(5)
+    ai(5) = 0.0_c_double
+    ar(10) = dr - J(10)
+    ai(10) = di
+    ar(11) = -J(11)
+    ai(11) = 0.0_c_double
+    ar(12) = -J(12)
+    ai(12) = 0.0_c_double
+    ar(13) = -J(13)
+    ai(13) = 0.0_c_double
+    ar(14) = -J(14)
+    ai(14) = 0.0_c_double
+    ar(19) = -J(19)
+    ai(19) = 0.0_c_double
+    ar(20) = dr - J(20)
+    ai(20) = di
+    ar(21) = -J(21)
+    ai(21) = 0.0_c_double
+    ar(22) = -J(22)
+    ai(22) = 0.0_c_double
+    ar(23) = -J(23)
+    ai(23) = 0.0_c_double
+    ar(30) = dr - J(30)
+    ai(30) = di
+    ar(31) = -J(31)
+    ai(31) = 0.0_c_double
+    ar(32) = -J(32)
+    ai(32) = 0.0_c_double
+    ar(33) = -J(33)
+    ai(33) = 0.0_c_double
+    ar(34) = -J(34)
+    ai(34) = 0.0_c_double
+    ar(35) = -J(35)
+    ai(35) = 0.0_c_double
+    ar(39) = -J(39)
+    ai(39) = 0.0_c_double
+    ar(40) = dr - J(40)
+    ai(40) = di
+    ar(41) = -J(41)
+    ai(41) = 0.0_c_double
+    ar(42) = -J(42)
+    ai(42) = 0.0_c_double
+    ar(43) = -J(43)
+    ai(43) = 0.0_c_double
+    ar(44) = -J(44)
+    ai(44) = 0.0_c_double
+    ar(48) = -J(48)
+    ai(48) = 0.0_c_double
+    ar(49) = -J(49)
+    ai(49) = 0.0_c_double
+    ar(50) = dr - J(50)
+    ai(50) = di
+    ar(51) = -J(51)
+    ai(51) = 0.0_c_double
+    ar(52) = -J(52)
+    ai(52) = 0.0_c_double
+    ar(53) = -J(53)
+    ai(53) = 0.0_c_double
+    ar(57) = -J(57)
+    ai(57) = 0.0_c_double
+    ar(58) = -J(58)
+    ai(58) = 0.0_c_double
+    ar(59) = -J(59)
+    ai(59) = 0.0_c_double
+    ar(60) = dr - J(60)
+    ai(60) = di
+    ar(61) = -J(61)
+    ai(61) = 0.0_c_double
+    ar(62) = -J(62)
+    ai(62) = 0.0_c_double
+    ar(66) = -J(66)
+    ai(66) = 0.0_c_double
+    ar(67) = -J(67)
+    ai(67) = 0.0_c_double
+    ar(68) = -J(68)
+    ai(68) = 0.0_c_double
+    ar(69) = -J(69)
+    ai(69) = 0.0_c_double
+    ar(70) = dr - J(70)
+    ai(70) = di
+    ar(71) = -J(71)
+    ai(71) = 0.0_c_double
+    ar(75) = -J(75)
+    ai(75) = 0.0_c_double
+    ar(76) = -J(76)
+    ai(76) = 0.0_c_double
+    ar(77) = -J(77)
+    ai(77) = 0.0_c_double
+    ar(78) = -J(78)
+    ai(78) = 0.0_c_double
+    ar(79) = -J(79)
+    ai(79) = 0.0_c_double
+    ar(80) = dr - J(80)
+    ai(80) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 9), unrolled over the entries
   ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -642,11 +816,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(12)
+      a(12) = a(p * nx + 3)
+      a(p * nx + 3) = swap
+      swap = a(13)
+      a(13) = a(p * nx + 4)
+      a(p * nx + 4) = swap
+      swap = a(14)
+      a(14) = a(p * nx + 5)
+      a(p * nx + 5) = swap
     end if
     a(10) = 1.0_c_double / a(10)
     do i = 2, 3 - 1
@@ -682,7 +865,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = a(3 * nx + j)
         a(3 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -715,7 +898,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = a(4 * nx + j)
         a(4 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -746,7 +929,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = a(5 * nx + j)
         a(5 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -775,7 +958,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = a(6 * nx + j)
         a(6 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -802,7 +985,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = a(7 * nx + j)
         a(7 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -950,7 +1133,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -958,6 +1141,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(12)
+      ar(12) = ar(p * nx + 3)
+      ar(p * nx + 3) = swap
+      swap = ai(12)
+      ai(12) = ai(p * nx + 3)
+      ai(p * nx + 3) = swap
+      swap = ar(13)
+      ar(13) = ar(p * nx + 4)
+      ar(p * nx + 4) = swap
+      swap = ai(13)
+      ai(13) = ai(p * nx + 4)
+      ai(p * nx + 4) = swap
+      swap = ar(14)
+      ar(14) = ar(p * nx + 5)
+      ar(p * nx + 5) = swap
+      swap = ai(14)
+      ai(14) = ai(p * nx + 5)
+      ai(p * nx + 5) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(10)
@@ -1055,7 +1256,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = ar(3 * nx + j)
         ar(3 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1137,7 +1338,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = ar(4 * nx + j)
         ar(4 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1211,7 +1412,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = ar(5 * nx + j)
         ar(5 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1277,7 +1478,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = ar(6 * nx + j)
         ar(6 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1335,7 +1536,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 9 - 1
         swap = ar(7 * nx + j)
         ar(7 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3125,12 +3326,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3304,12 +3500,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3483,23 +3674,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return

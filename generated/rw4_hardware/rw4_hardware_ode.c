@@ -683,6 +683,213 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *RW4_HARDWARE_RESTRICT J, double d,
+                     double *RW4_HARDWARE_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[3] = -J[3];
+    a[5] = -J[5];
+    a[11] = d - J[11];
+    a[12] = -J[12];
+    a[13] = -J[13];
+    a[14] = -J[14];
+    a[15] = -J[15];
+    a[21] = -J[21];
+    a[22] = d - J[22];
+    a[23] = -J[23];
+    a[24] = -J[24];
+    a[25] = -J[25];
+    a[33] = d - J[33];
+    a[34] = -J[34];
+    a[35] = -J[35];
+    a[36] = -J[36];
+    a[37] = -J[37];
+    a[38] = -J[38];
+    a[39] = -J[39];
+    a[43] = -J[43];
+    a[44] = d - J[44];
+    a[45] = -J[45];
+    a[46] = -J[46];
+    a[47] = -J[47];
+    a[48] = -J[48];
+    a[49] = -J[49];
+    a[53] = -J[53];
+    a[54] = -J[54];
+    a[55] = d - J[55];
+    a[56] = -J[56];
+    a[57] = -J[57];
+    a[58] = -J[58];
+    a[59] = -J[59];
+    a[63] = -J[63];
+    a[64] = -J[64];
+    a[65] = -J[65];
+    a[66] = d - J[66];
+    a[67] = -J[67];
+    a[68] = -J[68];
+    a[69] = -J[69];
+    a[73] = -J[73];
+    a[74] = -J[74];
+    a[75] = -J[75];
+    a[76] = -J[76];
+    a[77] = d - J[77];
+    a[78] = -J[78];
+    a[79] = -J[79];
+    a[83] = -J[83];
+    a[84] = -J[84];
+    a[85] = -J[85];
+    a[86] = -J[86];
+    a[87] = -J[87];
+    a[88] = d - J[88];
+    a[89] = -J[89];
+    a[93] = -J[93];
+    a[94] = -J[94];
+    a[95] = -J[95];
+    a[96] = -J[96];
+    a[97] = -J[97];
+    a[98] = -J[98];
+    a[99] = d - J[99];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *RW4_HARDWARE_RESTRICT J, double dr, double di,
+                             double *RW4_HARDWARE_RESTRICT ar, double *RW4_HARDWARE_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[3] = -J[3];
+    ai[3] = 0.0;
+    ar[5] = -J[5];
+    ai[5] = 0.0;
+    ar[11] = dr - J[11];
+    ai[11] = di;
+    ar[12] = -J[12];
+    ai[12] = 0.0;
+    ar[13] = -J[13];
+    ai[13] = 0.0;
+    ar[14] = -J[14];
+    ai[14] = 0.0;
+    ar[15] = -J[15];
+    ai[15] = 0.0;
+    ar[21] = -J[21];
+    ai[21] = 0.0;
+    ar[22] = dr - J[22];
+    ai[22] = di;
+    ar[23] = -J[23];
+    ai[23] = 0.0;
+    ar[24] = -J[24];
+    ai[24] = 0.0;
+    ar[25] = -J[25];
+    ai[25] = 0.0;
+    ar[33] = dr - J[33];
+    ai[33] = di;
+    ar[34] = -J[34];
+    ai[34] = 0.0;
+    ar[35] = -J[35];
+    ai[35] = 0.0;
+    ar[36] = -J[36];
+    ai[36] = 0.0;
+    ar[37] = -J[37];
+    ai[37] = 0.0;
+    ar[38] = -J[38];
+    ai[38] = 0.0;
+    ar[39] = -J[39];
+    ai[39] = 0.0;
+    ar[43] = -J[43];
+    ai[43] = 0.0;
+    ar[44] = dr - J[44];
+    ai[44] = di;
+    ar[45] = -J[45];
+    ai[45] = 0.0;
+    ar[46] = -J[46];
+    ai[46] = 0.0;
+    ar[47] = -J[47];
+    ai[47] = 0.0;
+    ar[48] = -J[48];
+    ai[48] = 0.0;
+    ar[49] = -J[49];
+    ai[49] = 0.0;
+    ar[53] = -J[53];
+    ai[53] = 0.0;
+    ar[54] = -J[54];
+    ai[54] = 0.0;
+    ar[55] = dr - J[55];
+    ai[55] = di;
+    ar[56] = -J[56];
+    ai[56] = 0.0;
+    ar[57] = -J[57];
+    ai[57] = 0.0;
+    ar[58] = -J[58];
+    ai[58] = 0.0;
+    ar[59] = -J[59];
+    ai[59] = 0.0;
+    ar[63] = -J[63];
+    ai[63] = 0.0;
+    ar[64] = -J[64];
+    ai[64] = 0.0;
+    ar[65] = -J[65];
+    ai[65] = 0.0;
+    ar[66] = dr - J[66];
+    ai[66] = di;
+    ar[67] = -J[67];
+    ai[67] = 0.0;
+    ar[68] = -J[68];
+    ai[68] = 0.0;
+    ar[69] = -J[69];
+    ai[69] = 0.0;
+    ar[73] = -J[73];
+    ai[73] = 0.0;
+    ar[74] = -J[74];
+    ai[74] = 0.0;
+    ar[75] = -J[75];
+    ai[75] = 0.0;
+    ar[76] = -J[76];
+    ai[76] = 0.0;
+    ar[77] = dr - J[77];
+    ai[77] = di;
+    ar[78] = -J[78];
+    ai[78] = 0.0;
+    ar[79] = -J[79];
+    ai[79] = 0.0;
+    ar[83] = -J[83];
+    ai[83] = 0.0;
+    ar[84] = -J[84];
+    ai[84] = 0.0;
+    ar[85] = -J[85];
+    ai[85] = 0.0;
+    ar[86] = -J[86];
+    ai[86] = 0.0;
+    ar[87] = -J[87];
+    ai[87] = 0.0;
+    ar[88] = dr - J[88];
+    ai[88] = di;
+    ar[89] = -J[89];
+    ai[89] = 0.0;
+    ar[93] = -J[93];
+    ai[93] = 0.0;
+    ar[94] = -J[94];
+    ai[94] = 0.0;
+    ar[95] = -J[95];
+    ai[95] = 0.0;
+    ar[96] = -J[96];
+    ai[96] = 0.0;
+    ar[97] = -J[97];
+    ai[97] = 0.0;
+    ar[98] = -J[98];
+    ai[98] = 0.0;
+    ar[99] = dr - J[99];
+    ai[99] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 10), unrolled over the entries
    of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -715,11 +922,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * RW4_HARDWARE_NX + j];
             a[1 * RW4_HARDWARE_NX + j] = a[p * RW4_HARDWARE_NX + j];
             a[p * RW4_HARDWARE_NX + j] = swap;
         }
+        swap = a[13];
+        a[13] = a[p * RW4_HARDWARE_NX + 3];
+        a[p * RW4_HARDWARE_NX + 3] = swap;
+        swap = a[14];
+        a[14] = a[p * RW4_HARDWARE_NX + 4];
+        a[p * RW4_HARDWARE_NX + 4] = swap;
+        swap = a[15];
+        a[15] = a[p * RW4_HARDWARE_NX + 5];
+        a[p * RW4_HARDWARE_NX + 5] = swap;
     }
     a[11] = 1.0 / a[11];
     for (i = 2; i < 3; ++i) {
@@ -753,7 +969,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = a[3 * RW4_HARDWARE_NX + j];
             a[3 * RW4_HARDWARE_NX + j] = a[p * RW4_HARDWARE_NX + j];
             a[p * RW4_HARDWARE_NX + j] = swap;
@@ -787,7 +1003,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = a[4 * RW4_HARDWARE_NX + j];
             a[4 * RW4_HARDWARE_NX + j] = a[p * RW4_HARDWARE_NX + j];
             a[p * RW4_HARDWARE_NX + j] = swap;
@@ -819,7 +1035,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = a[5 * RW4_HARDWARE_NX + j];
             a[5 * RW4_HARDWARE_NX + j] = a[p * RW4_HARDWARE_NX + j];
             a[p * RW4_HARDWARE_NX + j] = swap;
@@ -849,7 +1065,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = a[6 * RW4_HARDWARE_NX + j];
             a[6 * RW4_HARDWARE_NX + j] = a[p * RW4_HARDWARE_NX + j];
             a[p * RW4_HARDWARE_NX + j] = swap;
@@ -877,7 +1093,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = a[7 * RW4_HARDWARE_NX + j];
             a[7 * RW4_HARDWARE_NX + j] = a[p * RW4_HARDWARE_NX + j];
             a[p * RW4_HARDWARE_NX + j] = swap;
@@ -903,7 +1119,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = a[8 * RW4_HARDWARE_NX + j];
             a[8 * RW4_HARDWARE_NX + j] = a[p * RW4_HARDWARE_NX + j];
             a[p * RW4_HARDWARE_NX + j] = swap;
@@ -1052,7 +1268,7 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * RW4_HARDWARE_NX + j];
             ar[1 * RW4_HARDWARE_NX + j] = ar[p * RW4_HARDWARE_NX + j];
             ar[p * RW4_HARDWARE_NX + j] = swap;
@@ -1060,6 +1276,24 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
             ai[1 * RW4_HARDWARE_NX + j] = ai[p * RW4_HARDWARE_NX + j];
             ai[p * RW4_HARDWARE_NX + j] = swap;
         }
+        swap = ar[13];
+        ar[13] = ar[p * RW4_HARDWARE_NX + 3];
+        ar[p * RW4_HARDWARE_NX + 3] = swap;
+        swap = ai[13];
+        ai[13] = ai[p * RW4_HARDWARE_NX + 3];
+        ai[p * RW4_HARDWARE_NX + 3] = swap;
+        swap = ar[14];
+        ar[14] = ar[p * RW4_HARDWARE_NX + 4];
+        ar[p * RW4_HARDWARE_NX + 4] = swap;
+        swap = ai[14];
+        ai[14] = ai[p * RW4_HARDWARE_NX + 4];
+        ai[p * RW4_HARDWARE_NX + 4] = swap;
+        swap = ar[15];
+        ar[15] = ar[p * RW4_HARDWARE_NX + 5];
+        ar[p * RW4_HARDWARE_NX + 5] = swap;
+        swap = ai[15];
+        ai[15] = ai[p * RW4_HARDWARE_NX + 5];
+        ai[p * RW4_HARDWARE_NX + 5] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[11];
@@ -1155,7 +1389,7 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = ar[3 * RW4_HARDWARE_NX + j];
             ar[3 * RW4_HARDWARE_NX + j] = ar[p * RW4_HARDWARE_NX + j];
             ar[p * RW4_HARDWARE_NX + j] = swap;
@@ -1244,7 +1478,7 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = ar[4 * RW4_HARDWARE_NX + j];
             ar[4 * RW4_HARDWARE_NX + j] = ar[p * RW4_HARDWARE_NX + j];
             ar[p * RW4_HARDWARE_NX + j] = swap;
@@ -1325,7 +1559,7 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = ar[5 * RW4_HARDWARE_NX + j];
             ar[5 * RW4_HARDWARE_NX + j] = ar[p * RW4_HARDWARE_NX + j];
             ar[p * RW4_HARDWARE_NX + j] = swap;
@@ -1398,7 +1632,7 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = ar[6 * RW4_HARDWARE_NX + j];
             ar[6 * RW4_HARDWARE_NX + j] = ar[p * RW4_HARDWARE_NX + j];
             ar[p * RW4_HARDWARE_NX + j] = swap;
@@ -1463,7 +1697,7 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = ar[7 * RW4_HARDWARE_NX + j];
             ar[7 * RW4_HARDWARE_NX + j] = ar[p * RW4_HARDWARE_NX + j];
             ar[p * RW4_HARDWARE_NX + j] = swap;
@@ -1520,7 +1754,7 @@ static int lu_decompose_complex(double *RW4_HARDWARE_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 3; j < RW4_HARDWARE_NX; ++j) {
+        for (j = 3; j < 10; ++j) {
             swap = ar[8 * RW4_HARDWARE_NX + j];
             ar[8 * RW4_HARDWARE_NX + j] = ar[p * RW4_HARDWARE_NX + j];
             ar[p * RW4_HARDWARE_NX + j] = swap;
@@ -5851,12 +6085,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < RW4_HARDWARE_NX * RW4_HARDWARE_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < RW4_HARDWARE_NX; ++i) {
-            lu[i * RW4_HARDWARE_NX + i] = lu[i * RW4_HARDWARE_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6013,12 +6242,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < RW4_HARDWARE_NX * RW4_HARDWARE_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < RW4_HARDWARE_NX; ++i) {
-            lu[i * RW4_HARDWARE_NX + i] = lu[i * RW4_HARDWARE_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6156,23 +6380,8 @@ size_t rw4_hardware_rodas4_grid_batch(size_t n, long ntimes, const double *times
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < RW4_HARDWARE_NX * RW4_HARDWARE_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < RW4_HARDWARE_NX; ++i) {
-        e1[i * RW4_HARDWARE_NX + i] = e1[i * RW4_HARDWARE_NX + i] + gamma_h;
-        e2r[i * RW4_HARDWARE_NX + i] = e2r[i * RW4_HARDWARE_NX + i] + alpha_h;
-        e2i[i * RW4_HARDWARE_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }

@@ -679,6 +679,219 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(3) = -J(3)
+    a(5) = -J(5)
+    a(11) = d - J(11)
+    a(12) = -J(12)
+    a(13) = -J(13)
+    a(14) = -J(14)
+    a(15) = -J(15)
+    a(21) = -J(21)
+    a(22) = d - J(22)
+    a(23) = -J(23)
+    a(24) = -J(24)
+    a(25) = -J(25)
+    a(33) = d - J(33)
+    a(34) = -J(34)
+    a(35) = -J(35)
+    a(36) = -J(36)
+    a(37) = -J(37)
+    a(38) = -J(38)
+    a(39) = -J(39)
+    a(43) = -J(43)
+    a(44) = d - J(44)
+    a(45) = -J(45)
+    a(46) = -J(46)
+    a(47) = -J(47)
+    a(48) = -J(48)
+    a(49) = -J(49)
+    a(53) = -J(53)
+    a(54) = -J(54)
+    a(55) = d - J(55)
+    a(56) = -J(56)
+    a(57) = -J(57)
+    a(58) = -J(58)
+    a(59) = -J(59)
+    a(63) = -J(63)
+    a(64) = -J(64)
+    a(65) = -J(65)
+    a(66) = d - J(66)
+    a(67) = -J(67)
+    a(68) = -J(68)
+    a(69) = -J(69)
+    a(73) = -J(73)
+    a(74) = -J(74)
+    a(75) = -J(75)
+    a(76) = -J(76)
+    a(77) = d - J(77)
+    a(78) = -J(78)
+    a(79) = -J(79)
+    a(83) = -J(83)
+    a(84) = -J(84)
+    a(85) = -J(85)
+    a(86) = -J(86)
+    a(87) = -J(87)
+    a(88) = d - J(88)
+    a(89) = -J(89)
+    a(93) = -J(93)
+    a(94) = -J(94)
+    a(95) = -J(95)
+    a(96) = -J(96)
+    a(97) = -J(97)
+    a(98) = -J(98)
+    a(99) = d - J(99)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(3) = -J(3)
+    ai(3) = 0.0_c_double
+    ar(5) = -J(5)
+    ai(5) = 0.0_c_double
+    ar(11) = dr - J(11)
+    ai(11) = di
+    ar(12) = -J(12)
+    ai(12) = 0.0_c_double
+    ar(13) = -J(13)
+    ai(13) = 0.0_c_double
+    ar(14) = -J(14)
+    ai(14) = 0.0_c_double
+    ar(15) = -J(15)
+    ai(15) = 0.0_c_double
+    ar(21) = -J(21)
+    ai(21) = 0.0_c_double
+    ar(22) = dr - J(22)
+    ai(22) = di
+    ar(23) = -J(23)
+    ai(23) = 0.0_c_double
+    ar(24) = -J(24)
+    ai(24) = 0.0_c_double
+    ar(25) = -J(25)
+    ai(25) = 0.0_c_double
+    ar(33) = dr - J(33)
+    ai(33) = di
+    ar(34) = -J(34)
+    ai(34) = 0.0_c_double
+    ar(35) = -J(35)
+    ai(35) = 0.0_c_double
+    ar(36) = -J(36)
+    ai(36) = 0.0_c_double
+    ar(37) = -J(37)
+    ai(37) = 0.0_c_double
+    ar(38) = -J(38)
+    ai(38) = 0.0_c_double
+    ar(39) = -J(39)
+    ai(39) = 0.0_c_double
+    ar(43) = -J(43)
+    ai(43) = 0.0_c_double
+    ar(44) = dr - J(44)
+    ai(44) = di
+    ar(45) = -J(45)
+    ai(45) = 0.0_c_double
+    ar(46) = -J(46)
+    ai(46) = 0.0_c_double
+    ar(47) = -J(47)
+    ai(47) = 0.0_c_double
+    ar(48) = -J(48)
+    ai(48) = 0.0_c_double
+    ar(49) = -J(49)
+    ai(49) = 0.0_c_double
+    ar(53) = -J(53)
+    ai(53) = 0.0_c_double
+    ar(54) = -J(54)
+    ai(54) = 0.0_c_double
+    ar(55) = dr - J(55)
+    ai(55) = di
+    ar(56) = -J(56)
+    ai(56) = 0.0_c_double
+    ar(57) = -J(57)
+    ai(57) = 0.0_c_double
+    ar(58) = -J(58)
+    ai(58) = 0.0_c_double
+    ar(59) = -J(59)
+    ai(59) = 0.0_c_double
+    ar(63) = -J(63)
+    ai(63) = 0.0_c_double
+    ar(64) = -J(64)
+    ai(64) = 0.0_c_double
+    ar(65) = -J(65)
+    ai(65) = 0.0_c_double
+    ar(66) = dr - J(66)
+    ai(66) = di
+    ar(67) = -J(67)
+    ai(67) = 0.0_c_double
+    ar(68) = -J(68)
+    ai(68) = 0.0_c_double
+    ar(69) = -J(69)
+    ai(69) = 0.0_c_double
+    ar(73) = -J(73)
+    ai(73) = 0.0_c_double
+    ar(74) = -J(74)
+    ai(74) = 0.0_c_double
+    ar(75) = -J(75)
+    ai(75) = 0.0_c_double
+    ar(76) = -J(76)
+    ai(76) = 0.0_c_double
+    ar(77) = dr - J(77)
+    ai(77) = di
+    ar(78) = -J(78)
+    ai(78) = 0.0_c_double
+    ar(79) = -J(79)
+    ai(79) = 0.0_c_double
+    ar(83) = -J(83)
+    ai(83) = 0.0_c_double
+    ar(84) = -J(84)
+    ai(84) = 0.0_c_double
+    ar(85) = -J(85)
+    ai(85) = 0.0_c_double
+    ar(86) = -J(86)
+    ai(86) = 0.0_c_double
+    ar(87) = -J(87)
+    ai(87) = 0.0_c_double
+    ar(88) = dr - J(88)
+    ai(88) = di
+    ar(89) = -J(89)
+    ai(89) = 0.0_c_double
+    ar(93) = -J(93)
+    ai(93) = 0.0_c_double
+    ar(94) = -J(94)
+    ai(94) = 0.0_c_double
+    ar(95) = -J(95)
+    ai(95) = 0.0_c_double
+    ar(96) = -J(96)
+    ai(96) = 0.0_c_double
+    ar(97) = -J(97)
+    ai(97) = 0.0_c_double
+    ar(98) = -J(98)
+    ai(98) = 0.0_c_double
+    ar(99) = dr - J(99)
+    ai(99) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 10), unrolled over the entries
   ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -715,11 +928,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(13)
+      a(13) = a(p * nx + 3)
+      a(p * nx + 3) = swap
+      swap = a(14)
+      a(14) = a(p * nx + 4)
+      a(p * nx + 4) = swap
+      swap = a(15)
+      a(15) = a(p * nx + 5)
+      a(p * nx + 5) = swap
     end if
     a(11) = 1.0_c_double / a(11)
     do i = 2, 3 - 1
@@ -755,7 +977,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = a(3 * nx + j)
         a(3 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -790,7 +1012,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = a(4 * nx + j)
         a(4 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -823,7 +1045,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = a(5 * nx + j)
         a(5 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -854,7 +1076,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = a(6 * nx + j)
         a(6 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -883,7 +1105,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = a(7 * nx + j)
         a(7 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -910,7 +1132,7 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = a(8 * nx + j)
         a(8 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -1067,7 +1289,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1075,6 +1297,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(13)
+      ar(13) = ar(p * nx + 3)
+      ar(p * nx + 3) = swap
+      swap = ai(13)
+      ai(13) = ai(p * nx + 3)
+      ai(p * nx + 3) = swap
+      swap = ar(14)
+      ar(14) = ar(p * nx + 4)
+      ar(p * nx + 4) = swap
+      swap = ai(14)
+      ai(14) = ai(p * nx + 4)
+      ai(p * nx + 4) = swap
+      swap = ar(15)
+      ar(15) = ar(p * nx + 5)
+      ar(p * nx + 5) = swap
+      swap = ai(15)
+      ai(15) = ai(p * nx + 5)
+      ai(p * nx + 5) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(11)
@@ -1172,7 +1412,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = ar(3 * nx + j)
         ar(3 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1262,7 +1502,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = ar(4 * nx + j)
         ar(4 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1344,7 +1584,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = ar(5 * nx + j)
         ar(5 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1418,7 +1658,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = ar(6 * nx + j)
         ar(6 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1484,7 +1724,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = ar(7 * nx + j)
         ar(7 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1542,7 +1782,7 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 3, nx - 1
+      do j = 3, 10 - 1
         swap = ar(8 * nx + j)
         ar(8 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -3352,12 +3592,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3530,12 +3765,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3709,23 +3939,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return

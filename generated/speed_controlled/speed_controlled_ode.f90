@@ -568,6 +568,129 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(4) = -J(4)
+    a(6) = -J(6)
+    a(9) = d - J(9)
+    a(10) = -J(10)
+    a(12) = -J(12)
+    a(13) = -J(13)
+    a(14) = -J(14)
+    a(17) = -J(17)
+    a(18) = d - J(18)
+    a(20) = -J(20)
+    a(21) = -J(21)
+    a(22) = -J(22)
+    a(27) = d - J(27)
+    a(29) = -J(29)
+    a(31) = -J(31)
+    a(36) = d - J(36)
+    a(37) = -J(37)
+    a(38) = -J(38)
+    a(39) = -J(39)
+    a(44) = -J(44)
+    a(45) = d - J(45)
+    a(46) = -J(46)
+    a(47) = -J(47)
+    a(52) = -J(52)
+    a(53) = -J(53)
+    a(54) = d - J(54)
+    a(55) = -J(55)
+    a(60) = -J(60)
+    a(61) = -J(61)
+    a(62) = -J(62)
+    a(63) = d - J(63)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(4) = -J(4)
+    ai(4) = 0.0_c_double
+    ar(6) = -J(6)
+    ai(6) = 0.0_c_double
+    ar(9) = dr - J(9)
+    ai(9) = di
+    ar(10) = -J(10)
+    ai(10) = 0.0_c_double
+    ar(12) = -J(12)
+    ai(12) = 0.0_c_double
+    ar(13) = -J(13)
+    ai(13) = 0.0_c_double
+    ar(14) = -J(14)
+    ai(14) = 0.0_c_double
+    ar(17) = -J(17)
+    ai(17) = 0.0_c_double
+    ar(18) = dr - J(18)
+    ai(18) = di
+    ar(20) = -J(20)
+    ai(20) = 0.0_c_double
+    ar(21) = -J(21)
+    ai(21) = 0.0_c_double
+    ar(22) = -J(22)
+    ai(22) = 0.0_c_double
+    ar(27) = dr - J(27)
+    ai(27) = di
+    ar(29) = -J(29)
+    ai(29) = 0.0_c_double
+    ar(31) = -J(31)
+    ai(31) = 0.0_c_double
+    ar(36) = dr - J(36)
+    ai(36) = di
+    ar(37) = -J(37)
+    ai(37) = 0.0_c_double
+    ar(38) = -J(38)
+    ai(38) = 0.0_c_double
+    ar(39) = -J(39)
+    ai(39) = 0.0_c_double
+    ar(44) = -J(44)
+    ai(44) = 0.0_c_double
+    ar(45) = dr - J(45)
+    ai(45) = di
+    ar(46) = -J(46)
+    ai(46) = 0.0_c_double
+    ar(47) = -J(47)
+    ai(47) = 0.0_c_double
+    ar(52) = -J(52)
+    ai(52) = 0.0_c_double
+    ar(53) = -J(53)
+    ai(53) = 0.0_c_double
+    ar(54) = dr - J(54)
+    ai(54) = di
+    ar(55) = -J(55)
+    ai(55) = 0.0_c_double
+    ar(60) = -J(60)
+    ai(60) = 0.0_c_double
+    ar(61) = -J(61)
+    ai(61) = 0.0_c_double
+    ar(62) = -J(62)
+    ai(62) = 0.0_c_double
+    ar(63) = dr - J(63)
+    ai(63) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 4), (4, 8), unrolled over the entries
   ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -604,11 +727,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(12)
+      a(12) = a(p * nx + 4)
+      a(p * nx + 4) = swap
+      swap = a(13)
+      a(13) = a(p * nx + 5)
+      a(p * nx + 5) = swap
+      swap = a(14)
+      a(14) = a(p * nx + 6)
+      a(p * nx + 6) = swap
     end if
     a(9) = 1.0_c_double / a(9)
     do i = 2, 3 - 1
@@ -652,7 +784,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 4, nx - 1
+      do j = 4, 8 - 1
         swap = a(4 * nx + j)
         a(4 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -681,7 +813,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 4, nx - 1
+      do j = 4, 8 - 1
         swap = a(5 * nx + j)
         a(5 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -708,7 +840,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 4, nx - 1
+      do j = 4, 8 - 1
         swap = a(6 * nx + j)
         a(6 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
@@ -841,7 +973,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -849,6 +981,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(12)
+      ar(12) = ar(p * nx + 4)
+      ar(p * nx + 4) = swap
+      swap = ai(12)
+      ai(12) = ai(p * nx + 4)
+      ai(p * nx + 4) = swap
+      swap = ar(13)
+      ar(13) = ar(p * nx + 5)
+      ar(p * nx + 5) = swap
+      swap = ai(13)
+      ai(13) = ai(p * nx + 5)
+      ai(p * nx + 5) = swap
+      swap = ar(14)
+      ar(14) = ar(p * nx + 6)
+      ar(p * nx + 6) = swap
+      swap = ai(14)
+      ai(14) = ai(p * nx + 6)
+      ai(p * nx + 6) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(9)
@@ -973,7 +1123,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 4, nx - 1
+      do j = 4, 8 - 1
         swap = ar(4 * nx + j)
         ar(4 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1039,7 +1189,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 4, nx - 1
+      do j = 4, 8 - 1
         swap = ar(5 * nx + j)
         ar(5 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1097,7 +1247,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 4, nx - 1
+      do j = 4, 8 - 1
         swap = ar(6 * nx + j)
         ar(6 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2852,12 +3002,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3031,12 +3176,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3210,23 +3350,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return

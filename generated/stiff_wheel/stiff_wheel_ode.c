@@ -532,6 +532,122 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *STIFF_WHEEL_RESTRICT J, double d, double *STIFF_WHEEL_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[4] = -J[4];
+    a[6] = -J[6];
+    a[9] = d - J[9];
+    a[10] = -J[10];
+    a[12] = -J[12];
+    a[13] = -J[13];
+    a[14] = -J[14];
+    a[17] = -J[17];
+    a[18] = d - J[18];
+    a[20] = -J[20];
+    a[21] = -J[21];
+    a[22] = -J[22];
+    a[27] = d - J[27];
+    a[29] = -J[29];
+    a[31] = -J[31];
+    a[36] = d - J[36];
+    a[37] = -J[37];
+    a[38] = -J[38];
+    a[39] = -J[39];
+    a[44] = -J[44];
+    a[45] = d - J[45];
+    a[46] = -J[46];
+    a[47] = -J[47];
+    a[52] = -J[52];
+    a[53] = -J[53];
+    a[54] = d - J[54];
+    a[55] = -J[55];
+    a[60] = -J[60];
+    a[61] = -J[61];
+    a[62] = -J[62];
+    a[63] = d - J[63];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *STIFF_WHEEL_RESTRICT J, double dr, double di,
+                             double *STIFF_WHEEL_RESTRICT ar, double *STIFF_WHEEL_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[4] = -J[4];
+    ai[4] = 0.0;
+    ar[6] = -J[6];
+    ai[6] = 0.0;
+    ar[9] = dr - J[9];
+    ai[9] = di;
+    ar[10] = -J[10];
+    ai[10] = 0.0;
+    ar[12] = -J[12];
+    ai[12] = 0.0;
+    ar[13] = -J[13];
+    ai[13] = 0.0;
+    ar[14] = -J[14];
+    ai[14] = 0.0;
+    ar[17] = -J[17];
+    ai[17] = 0.0;
+    ar[18] = dr - J[18];
+    ai[18] = di;
+    ar[20] = -J[20];
+    ai[20] = 0.0;
+    ar[21] = -J[21];
+    ai[21] = 0.0;
+    ar[22] = -J[22];
+    ai[22] = 0.0;
+    ar[27] = dr - J[27];
+    ai[27] = di;
+    ar[29] = -J[29];
+    ai[29] = 0.0;
+    ar[31] = -J[31];
+    ai[31] = 0.0;
+    ar[36] = dr - J[36];
+    ai[36] = di;
+    ar[37] = -J[37];
+    ai[37] = 0.0;
+    ar[38] = -J[38];
+    ai[38] = 0.0;
+    ar[39] = -J[39];
+    ai[39] = 0.0;
+    ar[44] = -J[44];
+    ai[44] = 0.0;
+    ar[45] = dr - J[45];
+    ai[45] = di;
+    ar[46] = -J[46];
+    ai[46] = 0.0;
+    ar[47] = -J[47];
+    ai[47] = 0.0;
+    ar[52] = -J[52];
+    ai[52] = 0.0;
+    ar[53] = -J[53];
+    ai[53] = 0.0;
+    ar[54] = dr - J[54];
+    ai[54] = di;
+    ar[55] = -J[55];
+    ai[55] = 0.0;
+    ar[60] = -J[60];
+    ai[60] = 0.0;
+    ar[61] = -J[61];
+    ai[61] = 0.0;
+    ar[62] = -J[62];
+    ai[62] = 0.0;
+    ar[63] = dr - J[63];
+    ai[63] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 4), (4, 8), unrolled over the entries
    of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -564,11 +680,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * STIFF_WHEEL_NX + j];
             a[1 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
             a[p * STIFF_WHEEL_NX + j] = swap;
         }
+        swap = a[12];
+        a[12] = a[p * STIFF_WHEEL_NX + 4];
+        a[p * STIFF_WHEEL_NX + 4] = swap;
+        swap = a[13];
+        a[13] = a[p * STIFF_WHEEL_NX + 5];
+        a[p * STIFF_WHEEL_NX + 5] = swap;
+        swap = a[14];
+        a[14] = a[p * STIFF_WHEEL_NX + 6];
+        a[p * STIFF_WHEEL_NX + 6] = swap;
     }
     a[9] = 1.0 / a[9];
     for (i = 2; i < 3; ++i) {
@@ -609,7 +734,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 4; j < 8; ++j) {
             swap = a[4 * STIFF_WHEEL_NX + j];
             a[4 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
             a[p * STIFF_WHEEL_NX + j] = swap;
@@ -637,7 +762,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 4; j < 8; ++j) {
             swap = a[5 * STIFF_WHEEL_NX + j];
             a[5 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
             a[p * STIFF_WHEEL_NX + j] = swap;
@@ -663,7 +788,7 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 4; j < 8; ++j) {
             swap = a[6 * STIFF_WHEEL_NX + j];
             a[6 * STIFF_WHEEL_NX + j] = a[p * STIFF_WHEEL_NX + j];
             a[p * STIFF_WHEEL_NX + j] = swap;
@@ -789,7 +914,7 @@ static int lu_decompose_complex(double *STIFF_WHEEL_RESTRICT ar, double *STIFF_W
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * STIFF_WHEEL_NX + j];
             ar[1 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
             ar[p * STIFF_WHEEL_NX + j] = swap;
@@ -797,6 +922,24 @@ static int lu_decompose_complex(double *STIFF_WHEEL_RESTRICT ar, double *STIFF_W
             ai[1 * STIFF_WHEEL_NX + j] = ai[p * STIFF_WHEEL_NX + j];
             ai[p * STIFF_WHEEL_NX + j] = swap;
         }
+        swap = ar[12];
+        ar[12] = ar[p * STIFF_WHEEL_NX + 4];
+        ar[p * STIFF_WHEEL_NX + 4] = swap;
+        swap = ai[12];
+        ai[12] = ai[p * STIFF_WHEEL_NX + 4];
+        ai[p * STIFF_WHEEL_NX + 4] = swap;
+        swap = ar[13];
+        ar[13] = ar[p * STIFF_WHEEL_NX + 5];
+        ar[p * STIFF_WHEEL_NX + 5] = swap;
+        swap = ai[13];
+        ai[13] = ai[p * STIFF_WHEEL_NX + 5];
+        ai[p * STIFF_WHEEL_NX + 5] = swap;
+        swap = ar[14];
+        ar[14] = ar[p * STIFF_WHEEL_NX + 6];
+        ar[p * STIFF_WHEEL_NX + 6] = swap;
+        swap = ai[14];
+        ai[14] = ai[p * STIFF_WHEEL_NX + 6];
+        ai[p * STIFF_WHEEL_NX + 6] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[9];
@@ -918,7 +1061,7 @@ static int lu_decompose_complex(double *STIFF_WHEEL_RESTRICT ar, double *STIFF_W
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 4; j < 8; ++j) {
             swap = ar[4 * STIFF_WHEEL_NX + j];
             ar[4 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
             ar[p * STIFF_WHEEL_NX + j] = swap;
@@ -983,7 +1126,7 @@ static int lu_decompose_complex(double *STIFF_WHEEL_RESTRICT ar, double *STIFF_W
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 4; j < 8; ++j) {
             swap = ar[5 * STIFF_WHEEL_NX + j];
             ar[5 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
             ar[p * STIFF_WHEEL_NX + j] = swap;
@@ -1040,7 +1183,7 @@ static int lu_decompose_complex(double *STIFF_WHEEL_RESTRICT ar, double *STIFF_W
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 4; j < STIFF_WHEEL_NX; ++j) {
+        for (j = 4; j < 8; ++j) {
             swap = ar[6 * STIFF_WHEEL_NX + j];
             ar[6 * STIFF_WHEEL_NX + j] = ar[p * STIFF_WHEEL_NX + j];
             ar[p * STIFF_WHEEL_NX + j] = swap;
@@ -5169,12 +5312,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < STIFF_WHEEL_NX * STIFF_WHEEL_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-            lu[i * STIFF_WHEEL_NX + i] = lu[i * STIFF_WHEEL_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -5331,12 +5469,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < STIFF_WHEEL_NX * STIFF_WHEEL_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-            lu[i * STIFF_WHEEL_NX + i] = lu[i * STIFF_WHEEL_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -5474,23 +5607,8 @@ size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < STIFF_WHEEL_NX * STIFF_WHEEL_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-        e1[i * STIFF_WHEEL_NX + i] = e1[i * STIFF_WHEEL_NX + i] + gamma_h;
-        e2r[i * STIFF_WHEEL_NX + i] = e2r[i * STIFF_WHEEL_NX + i] + alpha_h;
-        e2i[i * STIFF_WHEEL_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }

@@ -600,6 +600,104 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *TORQUE_FREE_RESTRICT J, double d, double *TORQUE_FREE_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[3] = -J[3];
+    a[5] = -J[5];
+    a[8] = d - J[8];
+    a[9] = -J[9];
+    a[10] = -J[10];
+    a[11] = -J[11];
+    a[12] = -J[12];
+    a[15] = -J[15];
+    a[16] = d - J[16];
+    a[17] = -J[17];
+    a[18] = -J[18];
+    a[19] = -J[19];
+    a[24] = d - J[24];
+    a[25] = -J[25];
+    a[26] = -J[26];
+    a[27] = -J[27];
+    a[31] = -J[31];
+    a[32] = d - J[32];
+    a[33] = -J[33];
+    a[34] = -J[34];
+    a[38] = -J[38];
+    a[39] = -J[39];
+    a[40] = d - J[40];
+    a[41] = -J[41];
+    a[48] = d - J[48];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *TORQUE_FREE_RESTRICT J, double dr, double di,
+                             double *TORQUE_FREE_RESTRICT ar, double *TORQUE_FREE_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[3] = -J[3];
+    ai[3] = 0.0;
+    ar[5] = -J[5];
+    ai[5] = 0.0;
+    ar[8] = dr - J[8];
+    ai[8] = di;
+    ar[9] = -J[9];
+    ai[9] = 0.0;
+    ar[10] = -J[10];
+    ai[10] = 0.0;
+    ar[11] = -J[11];
+    ai[11] = 0.0;
+    ar[12] = -J[12];
+    ai[12] = 0.0;
+    ar[15] = -J[15];
+    ai[15] = 0.0;
+    ar[16] = dr - J[16];
+    ai[16] = di;
+    ar[17] = -J[17];
+    ai[17] = 0.0;
+    ar[18] = -J[18];
+    ai[18] = 0.0;
+    ar[19] = -J[19];
+    ai[19] = 0.0;
+    ar[24] = dr - J[24];
+    ai[24] = di;
+    ar[25] = -J[25];
+    ai[25] = 0.0;
+    ar[26] = -J[26];
+    ai[26] = 0.0;
+    ar[27] = -J[27];
+    ai[27] = 0.0;
+    ar[31] = -J[31];
+    ai[31] = 0.0;
+    ar[32] = dr - J[32];
+    ai[32] = di;
+    ar[33] = -J[33];
+    ai[33] = 0.0;
+    ar[34] = -J[34];
+    ai[34] = 0.0;
+    ar[38] = -J[38];
+    ai[38] = 0.0;
+    ar[39] = -J[39];
+    ai[39] = 0.0;
+    ar[40] = dr - J[40];
+    ai[40] = di;
+    ar[41] = -J[41];
+    ai[41] = 0.0;
+    ar[48] = dr - J[48];
+    ai[48] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 6), (6, 7), unrolled over the entries
    of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -632,11 +730,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < TORQUE_FREE_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * TORQUE_FREE_NX + j];
             a[1 * TORQUE_FREE_NX + j] = a[p * TORQUE_FREE_NX + j];
             a[p * TORQUE_FREE_NX + j] = swap;
         }
+        swap = a[10];
+        a[10] = a[p * TORQUE_FREE_NX + 3];
+        a[p * TORQUE_FREE_NX + 3] = swap;
+        swap = a[11];
+        a[11] = a[p * TORQUE_FREE_NX + 4];
+        a[p * TORQUE_FREE_NX + 4] = swap;
+        swap = a[12];
+        a[12] = a[p * TORQUE_FREE_NX + 5];
+        a[p * TORQUE_FREE_NX + 5] = swap;
     }
     a[8] = 1.0 / a[8];
     for (i = 2; i < 3; ++i) {
@@ -670,11 +777,14 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < TORQUE_FREE_NX; ++j) {
+        for (j = 3; j < 6; ++j) {
             swap = a[3 * TORQUE_FREE_NX + j];
             a[3 * TORQUE_FREE_NX + j] = a[p * TORQUE_FREE_NX + j];
             a[p * TORQUE_FREE_NX + j] = swap;
         }
+        swap = a[27];
+        a[27] = a[p * TORQUE_FREE_NX + 6];
+        a[p * TORQUE_FREE_NX + 6] = swap;
     }
     a[24] = 1.0 / a[24];
     for (i = 4; i < 6; ++i) {
@@ -698,11 +808,14 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < TORQUE_FREE_NX; ++j) {
+        for (j = 3; j < 6; ++j) {
             swap = a[4 * TORQUE_FREE_NX + j];
             a[4 * TORQUE_FREE_NX + j] = a[p * TORQUE_FREE_NX + j];
             a[p * TORQUE_FREE_NX + j] = swap;
         }
+        swap = a[34];
+        a[34] = a[p * TORQUE_FREE_NX + 6];
+        a[p * TORQUE_FREE_NX + 6] = swap;
     }
     a[32] = 1.0 / a[32];
     for (i = 5; i < 6; ++i) {
@@ -825,7 +938,7 @@ static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < TORQUE_FREE_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * TORQUE_FREE_NX + j];
             ar[1 * TORQUE_FREE_NX + j] = ar[p * TORQUE_FREE_NX + j];
             ar[p * TORQUE_FREE_NX + j] = swap;
@@ -833,6 +946,24 @@ static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_
             ai[1 * TORQUE_FREE_NX + j] = ai[p * TORQUE_FREE_NX + j];
             ai[p * TORQUE_FREE_NX + j] = swap;
         }
+        swap = ar[10];
+        ar[10] = ar[p * TORQUE_FREE_NX + 3];
+        ar[p * TORQUE_FREE_NX + 3] = swap;
+        swap = ai[10];
+        ai[10] = ai[p * TORQUE_FREE_NX + 3];
+        ai[p * TORQUE_FREE_NX + 3] = swap;
+        swap = ar[11];
+        ar[11] = ar[p * TORQUE_FREE_NX + 4];
+        ar[p * TORQUE_FREE_NX + 4] = swap;
+        swap = ai[11];
+        ai[11] = ai[p * TORQUE_FREE_NX + 4];
+        ai[p * TORQUE_FREE_NX + 4] = swap;
+        swap = ar[12];
+        ar[12] = ar[p * TORQUE_FREE_NX + 5];
+        ar[p * TORQUE_FREE_NX + 5] = swap;
+        swap = ai[12];
+        ai[12] = ai[p * TORQUE_FREE_NX + 5];
+        ai[p * TORQUE_FREE_NX + 5] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[8];
@@ -928,7 +1059,7 @@ static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < TORQUE_FREE_NX; ++j) {
+        for (j = 3; j < 6; ++j) {
             swap = ar[3 * TORQUE_FREE_NX + j];
             ar[3 * TORQUE_FREE_NX + j] = ar[p * TORQUE_FREE_NX + j];
             ar[p * TORQUE_FREE_NX + j] = swap;
@@ -936,6 +1067,12 @@ static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_
             ai[3 * TORQUE_FREE_NX + j] = ai[p * TORQUE_FREE_NX + j];
             ai[p * TORQUE_FREE_NX + j] = swap;
         }
+        swap = ar[27];
+        ar[27] = ar[p * TORQUE_FREE_NX + 6];
+        ar[p * TORQUE_FREE_NX + 6] = swap;
+        swap = ai[27];
+        ai[27] = ai[p * TORQUE_FREE_NX + 6];
+        ai[p * TORQUE_FREE_NX + 6] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[24];
@@ -993,7 +1130,7 @@ static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < TORQUE_FREE_NX; ++j) {
+        for (j = 3; j < 6; ++j) {
             swap = ar[4 * TORQUE_FREE_NX + j];
             ar[4 * TORQUE_FREE_NX + j] = ar[p * TORQUE_FREE_NX + j];
             ar[p * TORQUE_FREE_NX + j] = swap;
@@ -1001,6 +1138,12 @@ static int lu_decompose_complex(double *TORQUE_FREE_RESTRICT ar, double *TORQUE_
             ai[4 * TORQUE_FREE_NX + j] = ai[p * TORQUE_FREE_NX + j];
             ai[p * TORQUE_FREE_NX + j] = swap;
         }
+        swap = ar[34];
+        ar[34] = ar[p * TORQUE_FREE_NX + 6];
+        ar[p * TORQUE_FREE_NX + 6] = swap;
+        swap = ai[34];
+        ai[34] = ai[p * TORQUE_FREE_NX + 6];
+        ai[p * TORQUE_FREE_NX + 6] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[32];
@@ -5823,12 +5966,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < TORQUE_FREE_NX * TORQUE_FREE_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < TORQUE_FREE_NX; ++i) {
-            lu[i * TORQUE_FREE_NX + i] = lu[i * TORQUE_FREE_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -5985,12 +6123,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < TORQUE_FREE_NX * TORQUE_FREE_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < TORQUE_FREE_NX; ++i) {
-            lu[i * TORQUE_FREE_NX + i] = lu[i * TORQUE_FREE_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6128,23 +6261,8 @@ size_t torque_free_rodas4_grid_batch(size_t n, long ntimes, const double *times,
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < TORQUE_FREE_NX * TORQUE_FREE_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < TORQUE_FREE_NX; ++i) {
-        e1[i * TORQUE_FREE_NX + i] = e1[i * TORQUE_FREE_NX + i] + gamma_h;
-        e2r[i * TORQUE_FREE_NX + i] = e2r[i * TORQUE_FREE_NX + i] + alpha_h;
-        e2i[i * TORQUE_FREE_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }

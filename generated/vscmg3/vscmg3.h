@@ -51,15 +51,27 @@ extern "C" {
  * Folded into the code:
  *   m_a = 750.0, I11 = 900.0, I22 = 800.0, I33 = 600.0
  *
- * Rotor B1: axis g1 = (0, 1, 0) in A, B1* at (0.5, 0, 0) m from A*;
+ * Rotor B1 on gimbal G1: spin axis g1 = (0, 1, 0) in A at gimbal angle 0,
+ *   turned by gam1 about the gimbal axis g_g1 = (1, 0, 0) in A
+ *   (g1(gam1) = cos(gam1) g1(0) + sin(gam1) g_g1 x g1(0));
+ *   B1* at (0.5, 0, 0) m from A*;
  *   no motor torque;
- *   friction b = 0 N m s.
- * Rotor B2: axis g2 = (0, 0, 1) in A, B2* at (0, 0.5, 0) m from A*;
+ *   friction b = 0 N m s;
+ *   gimbal G1: no gimbal torque.
+ * Rotor B2 on gimbal G2: spin axis g2 = (0, 0, 1) in A at gimbal angle 0,
+ *   turned by gam2 about the gimbal axis g_g2 = (0, 1, 0) in A
+ *   (g2(gam2) = cos(gam2) g2(0) + sin(gam2) g_g2 x g2(0));
+ *   B2* at (0, 0.5, 0) m from A*;
  *   no motor torque;
- *   friction b = 0 N m s.
- * Rotor B3: axis g3 = (1, 0, 0) in A, B3* at (0, 0, 0.5) m from A*;
+ *   friction b = 0 N m s;
+ *   gimbal G2: no gimbal torque.
+ * Rotor B3 on gimbal G3: spin axis g3 = (1, 0, 0) in A at gimbal angle 0,
+ *   turned by gam3 about the gimbal axis g_g3 = (0, 0, 1) in A
+ *   (g3(gam3) = cos(gam3) g3(0) + sin(gam3) g_g3 x g3(0));
+ *   B3* at (0, 0, 0.5) m from A*;
  *   no motor torque;
- *   friction b = 0 N m s.
+ *   friction b = 0 N m s;
+ *   gimbal G3: no gimbal torque.
  * No translation: the system's mass center is fixed in A and free in N.
  * The rotor angles are not states: nothing depends on them.
  */

@@ -1226,6 +1226,398 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *VSCMG3_RESTRICT J, double d, double *VSCMG3_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[6] = -J[6];
+    a[8] = -J[8];
+    a[16] = d - J[16];
+    a[17] = -J[17];
+    a[21] = -J[21];
+    a[22] = -J[22];
+    a[23] = -J[23];
+    a[31] = -J[31];
+    a[32] = d - J[32];
+    a[36] = -J[36];
+    a[37] = -J[37];
+    a[38] = -J[38];
+    a[48] = d - J[48];
+    a[49] = -J[49];
+    a[50] = -J[50];
+    a[51] = -J[51];
+    a[52] = -J[52];
+    a[53] = -J[53];
+    a[54] = -J[54];
+    a[55] = -J[55];
+    a[56] = -J[56];
+    a[57] = -J[57];
+    a[58] = -J[58];
+    a[59] = -J[59];
+    a[63] = -J[63];
+    a[64] = d - J[64];
+    a[65] = -J[65];
+    a[66] = -J[66];
+    a[67] = -J[67];
+    a[68] = -J[68];
+    a[69] = -J[69];
+    a[70] = -J[70];
+    a[71] = -J[71];
+    a[72] = -J[72];
+    a[73] = -J[73];
+    a[74] = -J[74];
+    a[78] = -J[78];
+    a[79] = -J[79];
+    a[80] = d - J[80];
+    a[81] = -J[81];
+    a[82] = -J[82];
+    a[83] = -J[83];
+    a[84] = -J[84];
+    a[85] = -J[85];
+    a[86] = -J[86];
+    a[87] = -J[87];
+    a[88] = -J[88];
+    a[89] = -J[89];
+    a[93] = -J[93];
+    a[94] = -J[94];
+    a[95] = -J[95];
+    a[96] = d - J[96];
+    a[97] = -J[97];
+    a[98] = -J[98];
+    a[99] = -J[99];
+    a[100] = -J[100];
+    a[101] = -J[101];
+    a[102] = -J[102];
+    a[103] = -J[103];
+    a[104] = -J[104];
+    a[108] = -J[108];
+    a[109] = -J[109];
+    a[110] = -J[110];
+    a[111] = -J[111];
+    a[112] = d - J[112];
+    a[113] = -J[113];
+    a[114] = -J[114];
+    a[115] = -J[115];
+    a[116] = -J[116];
+    a[117] = -J[117];
+    a[118] = -J[118];
+    a[119] = -J[119];
+    a[123] = -J[123];
+    a[124] = -J[124];
+    a[125] = -J[125];
+    a[126] = -J[126];
+    a[127] = -J[127];
+    a[128] = d - J[128];
+    a[129] = -J[129];
+    a[130] = -J[130];
+    a[131] = -J[131];
+    a[132] = -J[132];
+    a[133] = -J[133];
+    a[134] = -J[134];
+    a[138] = -J[138];
+    a[139] = -J[139];
+    a[140] = -J[140];
+    a[141] = -J[141];
+    a[142] = -J[142];
+    a[143] = -J[143];
+    a[144] = d - J[144];
+    a[145] = -J[145];
+    a[146] = -J[146];
+    a[147] = -J[147];
+    a[148] = -J[148];
+    a[149] = -J[149];
+    a[153] = -J[153];
+    a[154] = -J[154];
+    a[155] = -J[155];
+    a[156] = -J[156];
+    a[157] = -J[157];
+    a[158] = -J[158];
+    a[159] = -J[159];
+    a[160] = d - J[160];
+    a[161] = -J[161];
+    a[162] = -J[162];
+    a[163] = -J[163];
+    a[164] = -J[164];
+    a[168] = -J[168];
+    a[169] = -J[169];
+    a[170] = -J[170];
+    a[171] = -J[171];
+    a[172] = -J[172];
+    a[173] = -J[173];
+    a[174] = -J[174];
+    a[175] = -J[175];
+    a[176] = d - J[176];
+    a[177] = -J[177];
+    a[178] = -J[178];
+    a[179] = -J[179];
+    a[192] = d - J[192];
+    a[208] = d - J[208];
+    a[224] = d - J[224];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *VSCMG3_RESTRICT J, double dr, double di,
+                             double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[6] = -J[6];
+    ai[6] = 0.0;
+    ar[8] = -J[8];
+    ai[8] = 0.0;
+    ar[16] = dr - J[16];
+    ai[16] = di;
+    ar[17] = -J[17];
+    ai[17] = 0.0;
+    ar[21] = -J[21];
+    ai[21] = 0.0;
+    ar[22] = -J[22];
+    ai[22] = 0.0;
+    ar[23] = -J[23];
+    ai[23] = 0.0;
+    ar[31] = -J[31];
+    ai[31] = 0.0;
+    ar[32] = dr - J[32];
+    ai[32] = di;
+    ar[36] = -J[36];
+    ai[36] = 0.0;
+    ar[37] = -J[37];
+    ai[37] = 0.0;
+    ar[38] = -J[38];
+    ai[38] = 0.0;
+    ar[48] = dr - J[48];
+    ai[48] = di;
+    ar[49] = -J[49];
+    ai[49] = 0.0;
+    ar[50] = -J[50];
+    ai[50] = 0.0;
+    ar[51] = -J[51];
+    ai[51] = 0.0;
+    ar[52] = -J[52];
+    ai[52] = 0.0;
+    ar[53] = -J[53];
+    ai[53] = 0.0;
+    ar[54] = -J[54];
+    ai[54] = 0.0;
+    ar[55] = -J[55];
+    ai[55] = 0.0;
+    ar[56] = -J[56];
+    ai[56] = 0.0;
+    ar[57] = -J[57];
+    ai[57] = 0.0;
+    ar[58] = -J[58];
+    ai[58] = 0.0;
+    ar[59] = -J[59];
+    ai[59] = 0.0;
+    ar[63] = -J[63];
+    ai[63] = 0.0;
+    ar[64] = dr - J[64];
+    ai[64] = di;
+    ar[65] = -J[65];
+    ai[65] = 0.0;
+    ar[66] = -J[66];
+    ai[66] = 0.0;
+    ar[67] = -J[67];
+    ai[67] = 0.0;
+    ar[68] = -J[68];
+    ai[68] = 0.0;
+    ar[69] = -J[69];
+    ai[69] = 0.0;
+    ar[70] = -J[70];
+    ai[70] = 0.0;
+    ar[71] = -J[71];
+    ai[71] = 0.0;
+    ar[72] = -J[72];
+    ai[72] = 0.0;
+    ar[73] = -J[73];
+    ai[73] = 0.0;
+    ar[74] = -J[74];
+    ai[74] = 0.0;
+    ar[78] = -J[78];
+    ai[78] = 0.0;
+    ar[79] = -J[79];
+    ai[79] = 0.0;
+    ar[80] = dr - J[80];
+    ai[80] = di;
+    ar[81] = -J[81];
+    ai[81] = 0.0;
+    ar[82] = -J[82];
+    ai[82] = 0.0;
+    ar[83] = -J[83];
+    ai[83] = 0.0;
+    ar[84] = -J[84];
+    ai[84] = 0.0;
+    ar[85] = -J[85];
+    ai[85] = 0.0;
+    ar[86] = -J[86];
+    ai[86] = 0.0;
+    ar[87] = -J[87];
+    ai[87] = 0.0;
+    ar[88] = -J[88];
+    ai[88] = 0.0;
+    ar[89] = -J[89];
+    ai[89] = 0.0;
+    ar[93] = -J[93];
+    ai[93] = 0.0;
+    ar[94] = -J[94];
+    ai[94] = 0.0;
+    ar[95] = -J[95];
+    ai[95] = 0.0;
+    ar[96] = dr - J[96];
+    ai[96] = di;
+    ar[97] = -J[97];
+    ai[97] = 0.0;
+    ar[98] = -J[98];
+    ai[98] = 0.0;
+    ar[99] = -J[99];
+    ai[99] = 0.0;
+    ar[100] = -J[100];
+    ai[100] = 0.0;
+    ar[101] = -J[101];
+    ai[101] = 0.0;
+    ar[102] = -J[102];
+    ai[102] = 0.0;
+    ar[103] = -J[103];
+    ai[103] = 0.0;
+    ar[104] = -J[104];
+    ai[104] = 0.0;
+    ar[108] = -J[108];
+    ai[108] = 0.0;
+    ar[109] = -J[109];
+    ai[109] = 0.0;
+    ar[110] = -J[110];
+    ai[110] = 0.0;
+    ar[111] = -J[111];
+    ai[111] = 0.0;
+    ar[112] = dr - J[112];
+    ai[112] = di;
+    ar[113] = -J[113];
+    ai[113] = 0.0;
+    ar[114] = -J[114];
+    ai[114] = 0.0;
+    ar[115] = -J[115];
+    ai[115] = 0.0;
+    ar[116] = -J[116];
+    ai[116] = 0.0;
+    ar[117] = -J[117];
+    ai[117] = 0.0;
+    ar[118] = -J[118];
+    ai[118] = 0.0;
+    ar[119] = -J[119];
+    ai[119] = 0.0;
+    ar[123] = -J[123];
+    ai[123] = 0.0;
+    ar[124] = -J[124];
+    ai[124] = 0.0;
+    ar[125] = -J[125];
+    ai[125] = 0.0;
+    ar[126] = -J[126];
+    ai[126] = 0.0;
+    ar[127] = -J[127];
+    ai[127] = 0.0;
+    ar[128] = dr - J[128];
+    ai[128] = di;
+    ar[129] = -J[129];
+    ai[129] = 0.0;
+    ar[130] = -J[130];
+    ai[130] = 0.0;
+    ar[131] = -J[131];
+    ai[131] = 0.0;
+    ar[132] = -J[132];
+    ai[132] = 0.0;
+    ar[133] = -J[133];
+    ai[133] = 0.0;
+    ar[134] = -J[134];
+    ai[134] = 0.0;
+    ar[138] = -J[138];
+    ai[138] = 0.0;
+    ar[139] = -J[139];
+    ai[139] = 0.0;
+    ar[140] = -J[140];
+    ai[140] = 0.0;
+    ar[141] = -J[141];
+    ai[141] = 0.0;
+    ar[142] = -J[142];
+    ai[142] = 0.0;
+    ar[143] = -J[143];
+    ai[143] = 0.0;
+    ar[144] = dr - J[144];
+    ai[144] = di;
+    ar[145] = -J[145];
+    ai[145] = 0.0;
+    ar[146] = -J[146];
+    ai[146] = 0.0;
+    ar[147] = -J[147];
+    ai[147] = 0.0;
+    ar[148] = -J[148];
+    ai[148] = 0.0;
+    ar[149] = -J[149];
+    ai[149] = 0.0;
+    ar[153] = -J[153];
+    ai[153] = 0.0;
+    ar[154] = -J[154];
+    ai[154] = 0.0;
+    ar[155] = -J[155];
+    ai[155] = 0.0;
+    ar[156] = -J[156];
+    ai[156] = 0.0;
+    ar[157] = -J[157];
+    ai[157] = 0.0;
+    ar[158] = -J[158];
+    ai[158] = 0.0;
+    ar[159] = -J[159];
+    ai[159] = 0.0;
+    ar[160] = dr - J[160];
+    ai[160] = di;
+    ar[161] = -J[161];
+    ai[161] = 0.0;
+    ar[162] = -J[162];
+    ai[162] = 0.0;
+    ar[163] = -J[163];
+    ai[163] = 0.0;
+    ar[164] = -J[164];
+    ai[164] = 0.0;
+    ar[168] = -J[168];
+    ai[168] = 0.0;
+    ar[169] = -J[169];
+    ai[169] = 0.0;
+    ar[170] = -J[170];
+    ai[170] = 0.0;
+    ar[171] = -J[171];
+    ai[171] = 0.0;
+    ar[172] = -J[172];
+    ai[172] = 0.0;
+    ar[173] = -J[173];
+    ai[173] = 0.0;
+    ar[174] = -J[174];
+    ai[174] = 0.0;
+    ar[175] = -J[175];
+    ai[175] = 0.0;
+    ar[176] = dr - J[176];
+    ai[176] = di;
+    ar[177] = -J[177];
+    ai[177] = 0.0;
+    ar[178] = -J[178];
+    ai[178] = 0.0;
+    ar[179] = -J[179];
+    ai[179] = 0.0;
+    ar[192] = dr - J[192];
+    ai[192] = di;
+    ar[208] = dr - J[208];
+    ai[208] = di;
+    ar[224] = dr - J[224];
+    ai[224] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 12), (12, 13), (13, 14), (14, 15), unrolled over
    the entries
@@ -1259,11 +1651,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < VSCMG3_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * VSCMG3_NX + j];
             a[1 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[21];
+        a[21] = a[p * VSCMG3_NX + 6];
+        a[p * VSCMG3_NX + 6] = swap;
+        swap = a[22];
+        a[22] = a[p * VSCMG3_NX + 7];
+        a[p * VSCMG3_NX + 7] = swap;
+        swap = a[23];
+        a[23] = a[p * VSCMG3_NX + 8];
+        a[p * VSCMG3_NX + 8] = swap;
     }
     a[16] = 1.0 / a[16];
     for (i = 2; i < 3; ++i) {
@@ -1297,11 +1698,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[3 * VSCMG3_NX + j];
             a[3 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[57];
+        a[57] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[58];
+        a[58] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[59];
+        a[59] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[48] = 1.0 / a[48];
     for (i = 4; i < 12; ++i) {
@@ -1341,11 +1751,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[4 * VSCMG3_NX + j];
             a[4 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[72];
+        a[72] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[73];
+        a[73] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[74];
+        a[74] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[64] = 1.0 / a[64];
     for (i = 5; i < 12; ++i) {
@@ -1383,11 +1802,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[5 * VSCMG3_NX + j];
             a[5 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[87];
+        a[87] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[88];
+        a[88] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[89];
+        a[89] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[80] = 1.0 / a[80];
     for (i = 6; i < 12; ++i) {
@@ -1423,11 +1851,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[6 * VSCMG3_NX + j];
             a[6 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[102];
+        a[102] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[103];
+        a[103] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[104];
+        a[104] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[96] = 1.0 / a[96];
     for (i = 7; i < 12; ++i) {
@@ -1461,11 +1898,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[7 * VSCMG3_NX + j];
             a[7 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[117];
+        a[117] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[118];
+        a[118] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[119];
+        a[119] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[112] = 1.0 / a[112];
     for (i = 8; i < 12; ++i) {
@@ -1497,11 +1943,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[8 * VSCMG3_NX + j];
             a[8 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[132];
+        a[132] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[133];
+        a[133] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[134];
+        a[134] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[128] = 1.0 / a[128];
     for (i = 9; i < 12; ++i) {
@@ -1531,11 +1986,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 9) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[9 * VSCMG3_NX + j];
             a[9 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[147];
+        a[147] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[148];
+        a[148] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[149];
+        a[149] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[144] = 1.0 / a[144];
     for (i = 10; i < 12; ++i) {
@@ -1563,11 +2027,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 10) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = a[10 * VSCMG3_NX + j];
             a[10 * VSCMG3_NX + j] = a[p * VSCMG3_NX + j];
             a[p * VSCMG3_NX + j] = swap;
         }
+        swap = a[162];
+        a[162] = a[p * VSCMG3_NX + 12];
+        a[p * VSCMG3_NX + 12] = swap;
+        swap = a[163];
+        a[163] = a[p * VSCMG3_NX + 13];
+        a[p * VSCMG3_NX + 13] = swap;
+        swap = a[164];
+        a[164] = a[p * VSCMG3_NX + 14];
+        a[p * VSCMG3_NX + 14] = swap;
     }
     a[160] = 1.0 / a[160];
     for (i = 11; i < 12; ++i) {
@@ -1763,7 +2236,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < VSCMG3_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * VSCMG3_NX + j];
             ar[1 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -1771,6 +2244,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[1 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[21];
+        ar[21] = ar[p * VSCMG3_NX + 6];
+        ar[p * VSCMG3_NX + 6] = swap;
+        swap = ai[21];
+        ai[21] = ai[p * VSCMG3_NX + 6];
+        ai[p * VSCMG3_NX + 6] = swap;
+        swap = ar[22];
+        ar[22] = ar[p * VSCMG3_NX + 7];
+        ar[p * VSCMG3_NX + 7] = swap;
+        swap = ai[22];
+        ai[22] = ai[p * VSCMG3_NX + 7];
+        ai[p * VSCMG3_NX + 7] = swap;
+        swap = ar[23];
+        ar[23] = ar[p * VSCMG3_NX + 8];
+        ar[p * VSCMG3_NX + 8] = swap;
+        swap = ai[23];
+        ai[23] = ai[p * VSCMG3_NX + 8];
+        ai[p * VSCMG3_NX + 8] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[16];
@@ -1866,7 +2357,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 3) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[3 * VSCMG3_NX + j];
             ar[3 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -1874,6 +2365,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[3 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[57];
+        ar[57] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[57];
+        ai[57] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[58];
+        ar[58] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[58];
+        ai[58] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[59];
+        ar[59] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[59];
+        ai[59] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[48];
@@ -1995,7 +2504,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[4 * VSCMG3_NX + j];
             ar[4 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -2003,6 +2512,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[4 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[72];
+        ar[72] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[72];
+        ai[72] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[73];
+        ar[73] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[73];
+        ai[73] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[74];
+        ar[74] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[74];
+        ai[74] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[64];
@@ -2116,7 +2643,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[5 * VSCMG3_NX + j];
             ar[5 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -2124,6 +2651,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[5 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[87];
+        ar[87] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[87];
+        ai[87] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[88];
+        ar[88] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[88];
+        ai[88] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[89];
+        ar[89] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[89];
+        ai[89] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[80];
@@ -2229,7 +2774,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 6) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[6 * VSCMG3_NX + j];
             ar[6 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -2237,6 +2782,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[6 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[102];
+        ar[102] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[102];
+        ai[102] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[103];
+        ar[103] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[103];
+        ai[103] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[104];
+        ar[104] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[104];
+        ai[104] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[96];
@@ -2334,7 +2897,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 7) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[7 * VSCMG3_NX + j];
             ar[7 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -2342,6 +2905,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[7 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[117];
+        ar[117] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[117];
+        ai[117] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[118];
+        ar[118] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[118];
+        ai[118] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[119];
+        ar[119] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[119];
+        ai[119] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[112];
@@ -2431,7 +3012,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 8) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[8 * VSCMG3_NX + j];
             ar[8 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -2439,6 +3020,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[8 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[132];
+        ar[132] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[132];
+        ai[132] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[133];
+        ar[133] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[133];
+        ai[133] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[134];
+        ar[134] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[134];
+        ai[134] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[128];
@@ -2520,7 +3119,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 9) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[9 * VSCMG3_NX + j];
             ar[9 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -2528,6 +3127,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[9 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[147];
+        ar[147] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[147];
+        ai[147] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[148];
+        ar[148] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[148];
+        ai[148] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[149];
+        ar[149] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[149];
+        ai[149] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[144];
@@ -2601,7 +3218,7 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
         return 1;  /* singular */
     }
     if (p != 10) {
-        for (j = 3; j < VSCMG3_NX; ++j) {
+        for (j = 3; j < 12; ++j) {
             swap = ar[10 * VSCMG3_NX + j];
             ar[10 * VSCMG3_NX + j] = ar[p * VSCMG3_NX + j];
             ar[p * VSCMG3_NX + j] = swap;
@@ -2609,6 +3226,24 @@ static int lu_decompose_complex(double *VSCMG3_RESTRICT ar, double *VSCMG3_RESTR
             ai[10 * VSCMG3_NX + j] = ai[p * VSCMG3_NX + j];
             ai[p * VSCMG3_NX + j] = swap;
         }
+        swap = ar[162];
+        ar[162] = ar[p * VSCMG3_NX + 12];
+        ar[p * VSCMG3_NX + 12] = swap;
+        swap = ai[162];
+        ai[162] = ai[p * VSCMG3_NX + 12];
+        ai[p * VSCMG3_NX + 12] = swap;
+        swap = ar[163];
+        ar[163] = ar[p * VSCMG3_NX + 13];
+        ar[p * VSCMG3_NX + 13] = swap;
+        swap = ai[163];
+        ai[163] = ai[p * VSCMG3_NX + 13];
+        ai[p * VSCMG3_NX + 13] = swap;
+        swap = ar[164];
+        ar[164] = ar[p * VSCMG3_NX + 14];
+        ar[p * VSCMG3_NX + 14] = swap;
+        swap = ai[164];
+        ai[164] = ai[p * VSCMG3_NX + 14];
+        ai[p * VSCMG3_NX + 14] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[160];
@@ -9151,12 +9786,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < VSCMG3_NX; ++i) {
-            lu[i * VSCMG3_NX + i] = lu[i * VSCMG3_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -9313,12 +9943,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < VSCMG3_NX; ++i) {
-            lu[i * VSCMG3_NX + i] = lu[i * VSCMG3_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -9453,23 +10078,8 @@ size_t vscmg3_rodas4_grid_batch(size_t n, long ntimes, const double *times, doub
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < VSCMG3_NX; ++i) {
-        e1[i * VSCMG3_NX + i] = e1[i * VSCMG3_NX + i] + gamma_h;
-        e2r[i * VSCMG3_NX + i] = e2r[i * VSCMG3_NX + i] + alpha_h;
-        e2i[i * VSCMG3_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }

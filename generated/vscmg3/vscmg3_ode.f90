@@ -1201,6 +1201,405 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(6) = -J(6)
+    a(8) = -J(8)
+    a(16) = d - J(16)
+    a(17) = -J(17)
+    a(21) = -J(21)
+    a(22) = -J(22)
+    a(23) = -J(23)
+    a(31) = -J(31)
+    a(32) = d - J(32)
+    a(36) = -J(36)
+    a(37) = -J(37)
+    a(38) = -J(38)
+    a(48) = d - J(48)
+    a(49) = -J(49)
+    a(50) = -J(50)
+    a(51) = -J(51)
+    a(52) = -J(52)
+    a(53) = -J(53)
+    a(54) = -J(54)
+    a(55) = -J(55)
+    a(56) = -J(56)
+    a(57) = -J(57)
+    a(58) = -J(58)
+    a(59) = -J(59)
+    a(63) = -J(63)
+    a(64) = d - J(64)
+    a(65) = -J(65)
+    a(66) = -J(66)
+    a(67) = -J(67)
+    a(68) = -J(68)
+    a(69) = -J(69)
+    a(70) = -J(70)
+    a(71) = -J(71)
+    a(72) = -J(72)
+    a(73) = -J(73)
+    a(74) = -J(74)
+    a(78) = -J(78)
+    a(79) = -J(79)
+    a(80) = d - J(80)
+    a(81) = -J(81)
+    a(82) = -J(82)
+    a(83) = -J(83)
+    a(84) = -J(84)
+    a(85) = -J(85)
+    a(86) = -J(86)
+    a(87) = -J(87)
+    a(88) = -J(88)
+    a(89) = -J(89)
+    a(93) = -J(93)
+    a(94) = -J(94)
+    a(95) = -J(95)
+    a(96) = d - J(96)
+    a(97) = -J(97)
+    a(98) = -J(98)
+    a(99) = -J(99)
+    a(100) = -J(100)
+    a(101) = -J(101)
+    a(102) = -J(102)
+    a(103) = -J(103)
+    a(104) = -J(104)
+    a(108) = -J(108)
+    a(109) = -J(109)
+    a(110) = -J(110)
+    a(111) = -J(111)
+    a(112) = d - J(112)
+    a(113) = -J(113)
+    a(114) = -J(114)
+    a(115) = -J(115)
+    a(116) = -J(116)
+    a(117) = -J(117)
+    a(118) = -J(118)
+    a(119) = -J(119)
+    a(123) = -J(123)
+    a(124) = -J(124)
+    a(125) = -J(125)
+    a(126) = -J(126)
+    a(127) = -J(127)
+    a(128) = d - J(128)
+    a(129) = -J(129)
+    a(130) = -J(130)
+    a(131) = -J(131)
+    a(132) = -J(132)
+    a(133) = -J(133)
+    a(134) = -J(134)
+    a(138) = -J(138)
+    a(139) = -J(139)
+    a(140) = -J(140)
+    a(141) = -J(141)
+    a(142) = -J(142)
+    a(143) = -J(143)
+    a(144) = d - J(144)
+    a(145) = -J(145)
+    a(146) = -J(146)
+    a(147) = -J(147)
+    a(148) = -J(148)
+    a(149) = -J(149)
+    a(153) = -J(153)
+    a(154) = -J(154)
+    a(155) = -J(155)
+    a(156) = -J(156)
+    a(157) = -J(157)
+    a(158) = -J(158)
+    a(159) = -J(159)
+    a(160) = d - J(160)
+    a(161) = -J(161)
+    a(162) = -J(162)
+    a(163) = -J(163)
+    a(164) = -J(164)
+    a(168) = -J(168)
+    a(169) = -J(169)
+    a(170) = -J(170)
+    a(171) = -J(171)
+    a(172) = -J(172)
+    a(173) = -J(173)
+    a(174) = -J(174)
+    a(175) = -J(175)
+    a(176) = d - J(176)
+    a(177) = -J(177)
+    a(178) = -J(178)
+    a(179) = -J(179)
+    a(192) = d - J(192)
+    a(208) = d - J(208)
+    a(224) = d - J(224)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(6) = -J(6)
+    ai(6) = 0.0_c_double
+    ar(8) = -J(8)
+    ai(8) = 0.0_c_double
+    ar(16) = dr - J(16)
+    ai(16) = di
+    ar(17) = -J(17)
+    ai(17) = 0.0_c_double
+    ar(21) = -J(21)
+    ai(21) = 0.0_c_double
+    ar(22) = -J(22)
+    ai(22) = 0.0_c_double
+    ar(23) = -J(23)
+    ai(23) = 0.0_c_double
+    ar(31) = -J(31)
+    ai(31) = 0.0_c_double
+    ar(32) = dr - J(32)
+    ai(32) = di
+    ar(36) = -J(36)
+    ai(36) = 0.0_c_double
+    ar(37) = -J(37)
+    ai(37) = 0.0_c_double
+    ar(38) = -J(38)
+    ai(38) = 0.0_c_double
+    ar(48) = dr - J(48)
+    ai(48) = di
+    ar(49) = -J(49)
+    ai(49) = 0.0_c_double
+    ar(50) = -J(50)
+    ai(50) = 0.0_c_double
+    ar(51) = -J(51)
+    ai(51) = 0.0_c_double
+    ar(52) = -J(52)
+    ai(52) = 0.0_c_double
+    ar(53) = -J(53)
+    ai(53) = 0.0_c_double
+    ar(54) = -J(54)
+    ai(54) = 0.0_c_double
+    ar(55) = -J(55)
+    ai(55) = 0.0_c_double
+    ar(56) = -J(56)
+    ai(56) = 0.0_c_double
+    ar(57) = -J(57)
+    ai(57) = 0.0_c_double
+    ar(58) = -J(58)
+    ai(58) = 0.0_c_double
+    ar(59) = -J(59)
+    ai(59) = 0.0_c_double
+    ar(63) = -J(63)
+    ai(63) = 0.0_c_double
+    ar(64) = dr - J(64)
+    ai(64) = di
+    ar(65) = -J(65)
+    ai(65) = 0.0_c_double
+    ar(66) = -J(66)
+    ai(66) = 0.0_c_double
+    ar(67) = -J(67)
+    ai(67) = 0.0_c_double
+    ar(68) = -J(68)
+    ai(68) = 0.0_c_double
+    ar(69) = -J(69)
+    ai(69) = 0.0_c_double
+    ar(70) = -J(70)
+    ai(70) = 0.0_c_double
+    ar(71) = -J(71)
+    ai(71) = 0.0_c_double
+    ar(72) = -J(72)
+    ai(72) = 0.0_c_double
+    ar(73) = -J(73)
+    ai(73) = 0.0_c_double
+    ar(74) = -J(74)
+    ai(74) = 0.0_c_double
+    ar(78) = -J(78)
+    ai(78) = 0.0_c_double
+    ar(79) = -J(79)
+    ai(79) = 0.0_c_double
+    ar(80) = dr - J(80)
+    ai(80) = di
+    ar(81) = -J(81)
+    ai(81) = 0.0_c_double
+    ar(82) = -J(82)
+    ai(82) = 0.0_c_double
+    ar(83) = -J(83)
+    ai(83) = 0.0_c_double
+    ar(84) = -J(84)
+    ai(84) = 0.0_c_double
+    ar(85) = -J(85)
+    ai(85) = 0.0_c_double
+    ar(86) = -J(86)
+    ai(86) = 0.0_c_double
+    ar(87) = -J(87)
+    ai(87) = 0.0_c_double
+    ar(88) = -J(88)
+    ai(88) = 0.0_c_double
+    ar(89) = -J(89)
+    ai(89) = 0.0_c_double
+    ar(93) = -J(93)
+    ai(93) = 0.0_c_double
+    ar(94) = -J(94)
+    ai(94) = 0.0_c_double
+    ar(95) = -J(95)
+    ai(95) = 0.0_c_double
+    ar(96) = dr - J(96)
+    ai(96) = di
+    ar(97) = -J(97)
+    ai(97) = 0.0_c_double
+    ar(98) = -J(98)
+    ai(98) = 0.0_c_double
+    ar(99) = -J(99)
+    ai(99) = 0.0_c_double
+    ar(100) = -J(100)
+    ai(100) = 0.0_c_double
+    ar(101) = -J(101)
+    ai(101) = 0.0_c_double
+    ar(102) = -J(102)
+    ai(102) = 0.0_c_double
+    ar(103) = -J(103)
+    ai(103) = 0.0_c_double
+    ar(104) = -J(104)
+    ai(104) = 0.0_c_double
+    ar(108) = -J(108)
+    ai(108) = 0.0_c_double
+    ar(109) = -J(109)
+    ai(109) = 0.0_c_double
+    ar(110) = -J(110)
+    ai(110) = 0.0_c_double
+    ar(111) = -J(111)
+    ai(111) = 0.0_c_double
+    ar(112) = dr - J(112)
+    ai(112) = di
+    ar(113) = -J(113)
+    ai(113) = 0.0_c_double
+    ar(114) = -J(114)
+    ai(114) = 0.0_c_double
+    ar(115) = -J(115)
+    ai(115) = 0.0_c_double
+    ar(116) = -J(116)
+    ai(116) = 0.0_c_double
+    ar(117) = -J(117)
+    ai(117) = 0.0_c_double
+    ar(118) = -J(118)
+    ai(118) = 0.0_c_double
+    ar(119) = -J(119)
+    ai(119) = 0.0_c_double
+    ar(123) = -J(123)
+    ai(123) = 0.0_c_double
+    ar(124) = -J(124)
+    ai(124) = 0.0_c_double
+    ar(125) = -J(125)
+    ai(125) = 0.0_c_double
+    ar(126) = -J(126)
+    ai(126) = 0.0_c_double
+    ar(127) = -J(127)
+    ai(127) = 0.0_c_double
+    ar(128) = dr - J(128)
+    ai(128) = di
+    ar(129) = -J(129)
+    ai(129) = 0.0_c_double
+    ar(130) = -J(130)
+    ai(130) = 0.0_c_double
+    ar(131) = -J(131)
+    ai(131) = 0.0_c_double
+    ar(132) = -J(132)
+    ai(132) = 0.0_c_double
+    ar(133) = -J(133)
+    ai(133) = 0.0_c_double
+    ar(134) = -J(134)
+    ai(134) = 0.0_c_double
+    ar(138) = -J(138)
+    ai(138) = 0.0_c_double
+    ar(139) = -J(139)
+    ai(139) = 0.0_c_double
+    ar(140) = -J(140)
+    ai(140) = 0.0_c_double
+    ar(141) = -J(141)
+    ai(141) = 0.0_c_double
+    ar(142) = -J(142)
+    ai(142) = 0.0_c_double
+    ar(143) = -J(143)
+    ai(143) = 0.0_c_double
+    ar(144) = dr - J(144)
+    ai(144) = di
+    ar(145) = -J(145)
+    ai(145) = 0.0_c_double
+    ar(146) = -J(146)
+    ai(146) = 0.0_c_double
+    ar(147) = -J(147)
+    ai(147) = 0.0_c_double
+    ar(148) = -J(148)
+    ai(148) = 0.0_c_double
+    ar(149) = -J(149)
+    ai(149) = 0.0_c_double
+    ar(153) = -J(153)
+    ai(153) = 0.0_c_double
+    ar(154) = -J(154)
+    ai(154) = 0.0_c_double
+    ar(155) = -J(155)
+    ai(155) = 0.0_c_double
+    ar(156) = -J(156)
+    ai(156) = 0.0_c_double
+    ar(157) = -J(157)
+    ai(157) = 0.0_c_double
+    ar(158) = -J(158)
+    ai(158) = 0.0_c_double
+    ar(159) = -J(159)
+    ai(159) = 0.0_c_double
+    ar(160) = dr - J(160)
+    ai(160) = di
+    ar(161) = -J(161)
+    ai(161) = 0.0_c_double
+    ar(162) = -J(162)
+    ai(162) = 0.0_c_double
+    ar(163) = -J(163)
+    ai(163) = 0.0_c_double
+    ar(164) = -J(164)
+    ai(164) = 0.0_c_double
+    ar(168) = -J(168)
+    ai(168) = 0.0_c_double
+    ar(169) = -J(169)
+    ai(169) = 0.0_c_double
+    ar(170) = -J(170)
+    ai(170) = 0.0_c_double
+    ar(171) = -J(171)
+    ai(171) = 0.0_c_double
+    ar(172) = -J(172)
+    ai(172) = 0.0_c_double
+    ar(173) = -J(173)
+    ai(173) = 0.0_c_double
+    ar(174) = -J(174)
+    ai(174) = 0.0_c_double
+    ar(175) = -J(175)
+    ai(175) = 0.0_c_double
+    ar(176) = dr - J(176)
+    ai(176) = di
+    ar(177) = -J(177)
+    ai(177) = 0.0_c_double
+    ar(178) = -J(178)
+    ai(178) = 0.0_c_double
+    ar(179) = -J(179)
+    ai(179) = 0.0_c_double
+    ar(192) = dr - J(192)
+    ai(192) = di
+    ar(208) = dr - J(208)
+    ai(208) = di
+    ar(224) = dr - J(224)
+    ai(224) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 12), (12, 13), (13, 14), (14, 15), unrolled over
   ! the entries
@@ -1238,11 +1637,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(21)
+      a(21) = a(p * nx + 6)
+      a(p * nx + 6) = swap
+      swap = a(22)
+      a(22) = a(p * nx + 7)
+      a(p * nx + 7) = swap
+      swap = a(23)
+      a(23) = a(p * nx + 8)
+      a(p * nx + 8) = swap
     end if
     a(16) = 1.0_c_double / a(16)
     do i = 2, 3 - 1
@@ -1278,11 +1686,20 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(3 * nx + j)
         a(3 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(57)
+      a(57) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(58)
+      a(58) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(59)
+      a(59) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(48) = 1.0_c_double / a(48)
     do i = 4, 12 - 1
@@ -1323,11 +1740,20 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(4 * nx + j)
         a(4 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(72)
+      a(72) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(73)
+      a(73) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(74)
+      a(74) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(64) = 1.0_c_double / a(64)
     do i = 5, 12 - 1
@@ -1366,11 +1792,20 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(5 * nx + j)
         a(5 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(87)
+      a(87) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(88)
+      a(88) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(89)
+      a(89) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(80) = 1.0_c_double / a(80)
     do i = 6, 12 - 1
@@ -1407,11 +1842,20 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(6 * nx + j)
         a(6 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(102)
+      a(102) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(103)
+      a(103) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(104)
+      a(104) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(96) = 1.0_c_double / a(96)
     do i = 7, 12 - 1
@@ -1446,11 +1890,20 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(7 * nx + j)
         a(7 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(117)
+      a(117) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(118)
+      a(118) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(119)
+      a(119) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(112) = 1.0_c_double / a(112)
     do i = 8, 12 - 1
@@ -1483,11 +1936,20 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(8 * nx + j)
         a(8 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(132)
+      a(132) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(133)
+      a(133) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(134)
+      a(134) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(128) = 1.0_c_double / a(128)
     do i = 9, 12 - 1
@@ -1518,11 +1980,20 @@ contains
       return
     end if
     if (p /= 9) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(9 * nx + j)
         a(9 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(147)
+      a(147) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(148)
+      a(148) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(149)
+      a(149) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(144) = 1.0_c_double / a(144)
     do i = 10, 12 - 1
@@ -1551,11 +2022,20 @@ contains
       return
     end if
     if (p /= 10) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = a(10 * nx + j)
         a(10 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(162)
+      a(162) = a(p * nx + 12)
+      a(p * nx + 12) = swap
+      swap = a(163)
+      a(163) = a(p * nx + 13)
+      a(p * nx + 13) = swap
+      swap = a(164)
+      a(164) = a(p * nx + 14)
+      a(p * nx + 14) = swap
     end if
     a(160) = 1.0_c_double / a(160)
     do i = 11, 12 - 1
@@ -1762,7 +2242,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1770,6 +2250,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(21)
+      ar(21) = ar(p * nx + 6)
+      ar(p * nx + 6) = swap
+      swap = ai(21)
+      ai(21) = ai(p * nx + 6)
+      ai(p * nx + 6) = swap
+      swap = ar(22)
+      ar(22) = ar(p * nx + 7)
+      ar(p * nx + 7) = swap
+      swap = ai(22)
+      ai(22) = ai(p * nx + 7)
+      ai(p * nx + 7) = swap
+      swap = ar(23)
+      ar(23) = ar(p * nx + 8)
+      ar(p * nx + 8) = swap
+      swap = ai(23)
+      ai(23) = ai(p * nx + 8)
+      ai(p * nx + 8) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(16)
@@ -1867,7 +2365,7 @@ contains
       return
     end if
     if (p /= 3) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(3 * nx + j)
         ar(3 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1875,6 +2373,24 @@ contains
         ai(3 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(57)
+      ar(57) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(57)
+      ai(57) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(58)
+      ar(58) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(58)
+      ai(58) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(59)
+      ar(59) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(59)
+      ai(59) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(48)
@@ -1997,7 +2513,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(4 * nx + j)
         ar(4 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2005,6 +2521,24 @@ contains
         ai(4 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(72)
+      ar(72) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(72)
+      ai(72) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(73)
+      ar(73) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(73)
+      ai(73) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(74)
+      ar(74) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(74)
+      ai(74) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(64)
@@ -2119,7 +2653,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(5 * nx + j)
         ar(5 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2127,6 +2661,24 @@ contains
         ai(5 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(87)
+      ar(87) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(87)
+      ai(87) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(88)
+      ar(88) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(88)
+      ai(88) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(89)
+      ar(89) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(89)
+      ai(89) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(80)
@@ -2233,7 +2785,7 @@ contains
       return
     end if
     if (p /= 6) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(6 * nx + j)
         ar(6 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2241,6 +2793,24 @@ contains
         ai(6 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(102)
+      ar(102) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(102)
+      ai(102) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(103)
+      ar(103) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(103)
+      ai(103) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(104)
+      ar(104) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(104)
+      ai(104) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(96)
@@ -2339,7 +2909,7 @@ contains
       return
     end if
     if (p /= 7) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(7 * nx + j)
         ar(7 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2347,6 +2917,24 @@ contains
         ai(7 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(117)
+      ar(117) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(117)
+      ai(117) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(118)
+      ar(118) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(118)
+      ai(118) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(119)
+      ar(119) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(119)
+      ai(119) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(112)
@@ -2437,7 +3025,7 @@ contains
       return
     end if
     if (p /= 8) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(8 * nx + j)
         ar(8 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2445,6 +3033,24 @@ contains
         ai(8 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(132)
+      ar(132) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(132)
+      ai(132) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(133)
+      ar(133) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(133)
+      ai(133) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(134)
+      ar(134) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(134)
+      ai(134) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(128)
@@ -2527,7 +3133,7 @@ contains
       return
     end if
     if (p /= 9) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(9 * nx + j)
         ar(9 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2535,6 +3141,24 @@ contains
         ai(9 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(147)
+      ar(147) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(147)
+      ai(147) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(148)
+      ar(148) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(148)
+      ai(148) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(149)
+      ar(149) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(149)
+      ai(149) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(144)
@@ -2609,7 +3233,7 @@ contains
       return
     end if
     if (p /= 10) then
-      do j = 3, nx - 1
+      do j = 3, 12 - 1
         swap = ar(10 * nx + j)
         ar(10 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -2617,6 +3241,24 @@ contains
         ai(10 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(162)
+      ar(162) = ar(p * nx + 12)
+      ar(p * nx + 12) = swap
+      swap = ai(162)
+      ai(162) = ai(p * nx + 12)
+      ai(p * nx + 12) = swap
+      swap = ar(163)
+      ar(163) = ar(p * nx + 13)
+      ar(p * nx + 13) = swap
+      swap = ai(163)
+      ai(163) = ai(p * nx + 13)
+      ai(p * nx + 13) = swap
+      swap = ar(164)
+      ar(164) = ar(p * nx + 14)
+      ar(p * nx + 14) = swap
+      swap = ai(164)
+      ai(164) = ai(p * nx + 14)
+      ai(p * nx + 14) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(160)
@@ -4597,12 +5239,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -4774,12 +5411,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -4953,23 +5585,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return

@@ -5,7 +5,7 @@
  * template c/source.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
+ * Build id f74296a5d112754d: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -437,4 +437,15 @@ void wheel_spinup_power(double t, const double *x, const double *c, double *out)
     u2 = x[5];
     u4 = x[7];
     out[0] = c[2] * u2 - c[2] * u4;
+}
+
+/* out = the events' g(t, x): wheel_at_40_rad_s (1 ops). */
+void wheel_spinup_events(double t, const double *x, const double *c, double *out)
+{
+    double u4;
+
+    (void)t;  /* unused in some scenes */
+    (void)c;  /* unused in some scenes */
+    u4 = x[7];
+    out[0] = u4 - 40.0;
 }

@@ -4,7 +4,7 @@
 ! template fortran/module.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy versions
+! Build id f74296a5d112754d: a hash of the scene, gyrogen and sympy versions
 ! (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
 !
 ! Operation counts (sympy.count_ops, temporaries included):
@@ -37,8 +37,9 @@ module wheel_spinup_mod
   public :: wheel_spinup_kinetic_energy
   public :: wheel_spinup_angular_momentum
   public :: wheel_spinup_power
+  public :: wheel_spinup_events
 
-  character(len=*), parameter, public :: WHEEL_SPINUP_BUILD_ID = "12205a99de73d91a"
+  character(len=*), parameter, public :: WHEEL_SPINUP_BUILD_ID = "f74296a5d112754d"
   integer, parameter, public :: WHEEL_SPINUP_NX = 8  ! states
   integer, parameter, public :: WHEEL_SPINUP_NP = 1  ! parameters
   integer, parameter, public :: WHEEL_SPINUP_NC = 4  ! hoisted constants
@@ -445,5 +446,21 @@ contains
     u4 = x(7)
     out(0) = c(2) * u2 - c(2) * u4
   end subroutine wheel_spinup_power
+
+  ! out = the events' g(t, x): wheel_at_40_rad_s (1 ops).
+  subroutine wheel_spinup_events(t, x, c, out) bind(C, name="wheel_spinup_f_events")
+    real(c_double), value, intent(in) :: t
+    real(c_double), intent(in) :: x(0:7)
+    real(c_double), intent(in) :: c(0:3)
+    real(c_double), intent(out) :: out(0:0)
+    real(c_double) :: u4
+
+    associate (unused_t => t)  ! unused in some scenes
+    end associate
+    associate (unused_c => c)  ! unused in some scenes
+    end associate
+    u4 = x(7)
+    out(0) = u4 - 40.0_c_double
+  end subroutine wheel_spinup_events
 
 end module wheel_spinup_mod

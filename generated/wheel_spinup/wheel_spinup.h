@@ -5,7 +5,7 @@
  * template c/header.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
+ * Build id f74296a5d112754d: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -19,7 +19,7 @@
 extern "C" {
 #endif
 
-#define WHEEL_SPINUP_BUILD_ID "12205a99de73d91a"
+#define WHEEL_SPINUP_BUILD_ID "f74296a5d112754d"
 
 #define WHEEL_SPINUP_NX 8   /* states */
 #define WHEEL_SPINUP_NP 1   /* parameters */
@@ -99,6 +99,13 @@ void wheel_spinup_angular_momentum(double t, const double *x, const double *c, d
 
 /* out[0] = power of the motor torque, T (u4 - u2) (W); 3 ops. */
 void wheel_spinup_power(double t, const double *x, const double *c, double *out);
+
+/*
+ * out[k] = event k's g(t, x), whose zero crossings are the scene's events
+ * (1 ops):
+ *   out[0]  wheel_at_40_rad_s: u4 - 40 (up)
+ */
+void wheel_spinup_events(double t, const double *x, const double *c, double *out);
 
 #ifdef __cplusplus
 }

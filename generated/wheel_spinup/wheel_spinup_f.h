@@ -5,7 +5,7 @@
  * template fortran/bindings.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
+ * Build id f74296a5d112754d: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -85,6 +85,7 @@ void wheel_spinup_f_kinetic_energy(double t, const double *x, const double *c,
 void wheel_spinup_f_angular_momentum(double t, const double *x, const double *c,
         double *out);
 void wheel_spinup_f_power(double t, const double *x, const double *c, double *out);
+void wheel_spinup_f_events(double t, const double *x, const double *c, double *out);
 void wheel_spinup_f_jac(double t, const double *x, const double *c, double *J);
 int wheel_spinup_f_rk4(double t0, double t1, long steps, double *x, const double *c,
         wheel_spinup_stats *stats);
@@ -101,6 +102,14 @@ int wheel_spinup_f_dopri5_grid(long ntimes, const double *times, double *x,
 size_t wheel_spinup_f_dopri5_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_f_dopri5_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_f_dopri5_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 int wheel_spinup_f_dop853(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_f_dop853_batch(size_t n, double t0, double t1, double *x,
@@ -112,6 +121,14 @@ int wheel_spinup_f_dop853_grid(long ntimes, const double *times, double *x,
 size_t wheel_spinup_f_dop853_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_f_dop853_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_f_dop853_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 int wheel_spinup_f_rodas4(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_f_rodas4_batch(size_t n, double t0, double t1, double *x,
@@ -123,6 +140,14 @@ int wheel_spinup_f_rodas4_grid(long ntimes, const double *times, double *x,
 size_t wheel_spinup_f_rodas4_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_f_rodas4_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_f_rodas4_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 int wheel_spinup_f_radau5(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_f_radau5_batch(size_t n, double t0, double t1, double *x,
@@ -134,6 +159,14 @@ int wheel_spinup_f_radau5_grid(long ntimes, const double *times, double *x,
 size_t wheel_spinup_f_radau5_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_f_radau5_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_f_radau5_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 int wheel_spinup_f_taylor(double t0, double t1, double *x, const double *c, double rtol,
         double atol, double h0, long max_steps, wheel_spinup_stats *stats);
 size_t wheel_spinup_f_taylor_batch(size_t n, double t0, double t1, double *x,
@@ -145,6 +178,14 @@ int wheel_spinup_f_taylor_grid(long ntimes, const double *times, double *x,
 size_t wheel_spinup_f_taylor_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_f_taylor_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_f_taylor_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

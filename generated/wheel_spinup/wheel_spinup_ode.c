@@ -5,7 +5,7 @@
  * template c/ode.c.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
+ * Build id f74296a5d112754d: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -606,6 +606,114 @@ static int grid_ok(long n, const double *v)
     return 1;
 }
 
+/* a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+   at the others, which they never touch. */
+static void lu_shift(const double *WHEEL_SPINUP_RESTRICT J, double d,
+                     double *WHEEL_SPINUP_RESTRICT a)
+{
+    a[0] = d - J[0];
+    a[1] = -J[1];
+    a[2] = -J[2];
+    a[4] = -J[4];
+    a[6] = -J[6];
+    a[9] = d - J[9];
+    a[10] = -J[10];
+    a[12] = -J[12];
+    a[13] = -J[13];
+    a[14] = -J[14];
+    a[17] = -J[17];
+    a[18] = d - J[18];
+    a[20] = -J[20];
+    a[21] = -J[21];
+    a[22] = -J[22];
+    a[27] = d - J[27];
+    a[29] = -J[29];
+    a[31] = -J[31];
+    a[36] = d - J[36];
+    a[37] = -J[37];
+    a[38] = -J[38];
+    a[39] = -J[39];
+    a[44] = -J[44];
+    a[45] = d - J[45];
+    a[46] = -J[46];
+    a[47] = -J[47];
+    a[52] = -J[52];
+    a[53] = -J[53];
+    a[54] = d - J[54];
+    a[55] = -J[55];
+    a[63] = d - J[63];
+}
+
+/* lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+   left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+   reads of the state, in an augmented system). */
+static void lu_shift_complex(const double *WHEEL_SPINUP_RESTRICT J, double dr, double di,
+                             double *WHEEL_SPINUP_RESTRICT ar, double *WHEEL_SPINUP_RESTRICT ai)
+{
+    ar[0] = dr - J[0];
+    ai[0] = di;
+    ar[1] = -J[1];
+    ai[1] = 0.0;
+    ar[2] = -J[2];
+    ai[2] = 0.0;
+    ar[4] = -J[4];
+    ai[4] = 0.0;
+    ar[6] = -J[6];
+    ai[6] = 0.0;
+    ar[9] = dr - J[9];
+    ai[9] = di;
+    ar[10] = -J[10];
+    ai[10] = 0.0;
+    ar[12] = -J[12];
+    ai[12] = 0.0;
+    ar[13] = -J[13];
+    ai[13] = 0.0;
+    ar[14] = -J[14];
+    ai[14] = 0.0;
+    ar[17] = -J[17];
+    ai[17] = 0.0;
+    ar[18] = dr - J[18];
+    ai[18] = di;
+    ar[20] = -J[20];
+    ai[20] = 0.0;
+    ar[21] = -J[21];
+    ai[21] = 0.0;
+    ar[22] = -J[22];
+    ai[22] = 0.0;
+    ar[27] = dr - J[27];
+    ai[27] = di;
+    ar[29] = -J[29];
+    ai[29] = 0.0;
+    ar[31] = -J[31];
+    ai[31] = 0.0;
+    ar[36] = dr - J[36];
+    ai[36] = di;
+    ar[37] = -J[37];
+    ai[37] = 0.0;
+    ar[38] = -J[38];
+    ai[38] = 0.0;
+    ar[39] = -J[39];
+    ai[39] = 0.0;
+    ar[44] = -J[44];
+    ai[44] = 0.0;
+    ar[45] = dr - J[45];
+    ai[45] = di;
+    ar[46] = -J[46];
+    ai[46] = 0.0;
+    ar[47] = -J[47];
+    ai[47] = 0.0;
+    ar[52] = -J[52];
+    ai[52] = 0.0;
+    ar[53] = -J[53];
+    ai[53] = 0.0;
+    ar[54] = dr - J[54];
+    ai[54] = di;
+    ar[55] = -J[55];
+    ai[55] = 0.0;
+    ar[63] = dr - J[63];
+    ai[63] = di;
+}
+
 /* In-place LU decomposition with partial pivoting within the diagonal
    blocks (0, 1), (1, 3), (3, 4), (4, 7), (7, 8), unrolled over the entries
    of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -638,11 +746,20 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < WHEEL_SPINUP_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = a[1 * WHEEL_SPINUP_NX + j];
             a[1 * WHEEL_SPINUP_NX + j] = a[p * WHEEL_SPINUP_NX + j];
             a[p * WHEEL_SPINUP_NX + j] = swap;
         }
+        swap = a[12];
+        a[12] = a[p * WHEEL_SPINUP_NX + 4];
+        a[p * WHEEL_SPINUP_NX + 4] = swap;
+        swap = a[13];
+        a[13] = a[p * WHEEL_SPINUP_NX + 5];
+        a[p * WHEEL_SPINUP_NX + 5] = swap;
+        swap = a[14];
+        a[14] = a[p * WHEEL_SPINUP_NX + 6];
+        a[p * WHEEL_SPINUP_NX + 6] = swap;
     }
     a[9] = 1.0 / a[9];
     for (i = 2; i < 3; ++i) {
@@ -683,11 +800,14 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 4; j < WHEEL_SPINUP_NX; ++j) {
+        for (j = 4; j < 7; ++j) {
             swap = a[4 * WHEEL_SPINUP_NX + j];
             a[4 * WHEEL_SPINUP_NX + j] = a[p * WHEEL_SPINUP_NX + j];
             a[p * WHEEL_SPINUP_NX + j] = swap;
         }
+        swap = a[39];
+        a[39] = a[p * WHEEL_SPINUP_NX + 7];
+        a[p * WHEEL_SPINUP_NX + 7] = swap;
     }
     a[36] = 1.0 / a[36];
     for (i = 5; i < 7; ++i) {
@@ -711,11 +831,14 @@ static int lu_decompose(double *a, int *piv)
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 4; j < WHEEL_SPINUP_NX; ++j) {
+        for (j = 4; j < 7; ++j) {
             swap = a[5 * WHEEL_SPINUP_NX + j];
             a[5 * WHEEL_SPINUP_NX + j] = a[p * WHEEL_SPINUP_NX + j];
             a[p * WHEEL_SPINUP_NX + j] = swap;
         }
+        swap = a[47];
+        a[47] = a[p * WHEEL_SPINUP_NX + 7];
+        a[p * WHEEL_SPINUP_NX + 7] = swap;
     }
     a[45] = 1.0 / a[45];
     for (i = 6; i < 7; ++i) {
@@ -839,7 +962,7 @@ static int lu_decompose_complex(double *WHEEL_SPINUP_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 1) {
-        for (j = 1; j < WHEEL_SPINUP_NX; ++j) {
+        for (j = 1; j < 3; ++j) {
             swap = ar[1 * WHEEL_SPINUP_NX + j];
             ar[1 * WHEEL_SPINUP_NX + j] = ar[p * WHEEL_SPINUP_NX + j];
             ar[p * WHEEL_SPINUP_NX + j] = swap;
@@ -847,6 +970,24 @@ static int lu_decompose_complex(double *WHEEL_SPINUP_RESTRICT ar,
             ai[1 * WHEEL_SPINUP_NX + j] = ai[p * WHEEL_SPINUP_NX + j];
             ai[p * WHEEL_SPINUP_NX + j] = swap;
         }
+        swap = ar[12];
+        ar[12] = ar[p * WHEEL_SPINUP_NX + 4];
+        ar[p * WHEEL_SPINUP_NX + 4] = swap;
+        swap = ai[12];
+        ai[12] = ai[p * WHEEL_SPINUP_NX + 4];
+        ai[p * WHEEL_SPINUP_NX + 4] = swap;
+        swap = ar[13];
+        ar[13] = ar[p * WHEEL_SPINUP_NX + 5];
+        ar[p * WHEEL_SPINUP_NX + 5] = swap;
+        swap = ai[13];
+        ai[13] = ai[p * WHEEL_SPINUP_NX + 5];
+        ai[p * WHEEL_SPINUP_NX + 5] = swap;
+        swap = ar[14];
+        ar[14] = ar[p * WHEEL_SPINUP_NX + 6];
+        ar[p * WHEEL_SPINUP_NX + 6] = swap;
+        swap = ai[14];
+        ai[14] = ai[p * WHEEL_SPINUP_NX + 6];
+        ai[p * WHEEL_SPINUP_NX + 6] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[9];
@@ -968,7 +1109,7 @@ static int lu_decompose_complex(double *WHEEL_SPINUP_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 4) {
-        for (j = 4; j < WHEEL_SPINUP_NX; ++j) {
+        for (j = 4; j < 7; ++j) {
             swap = ar[4 * WHEEL_SPINUP_NX + j];
             ar[4 * WHEEL_SPINUP_NX + j] = ar[p * WHEEL_SPINUP_NX + j];
             ar[p * WHEEL_SPINUP_NX + j] = swap;
@@ -976,6 +1117,12 @@ static int lu_decompose_complex(double *WHEEL_SPINUP_RESTRICT ar,
             ai[4 * WHEEL_SPINUP_NX + j] = ai[p * WHEEL_SPINUP_NX + j];
             ai[p * WHEEL_SPINUP_NX + j] = swap;
         }
+        swap = ar[39];
+        ar[39] = ar[p * WHEEL_SPINUP_NX + 7];
+        ar[p * WHEEL_SPINUP_NX + 7] = swap;
+        swap = ai[39];
+        ai[39] = ai[p * WHEEL_SPINUP_NX + 7];
+        ai[p * WHEEL_SPINUP_NX + 7] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[36];
@@ -1033,7 +1180,7 @@ static int lu_decompose_complex(double *WHEEL_SPINUP_RESTRICT ar,
         return 1;  /* singular */
     }
     if (p != 5) {
-        for (j = 4; j < WHEEL_SPINUP_NX; ++j) {
+        for (j = 4; j < 7; ++j) {
             swap = ar[5 * WHEEL_SPINUP_NX + j];
             ar[5 * WHEEL_SPINUP_NX + j] = ar[p * WHEEL_SPINUP_NX + j];
             ar[p * WHEEL_SPINUP_NX + j] = swap;
@@ -1041,6 +1188,12 @@ static int lu_decompose_complex(double *WHEEL_SPINUP_RESTRICT ar,
             ai[5 * WHEEL_SPINUP_NX + j] = ai[p * WHEEL_SPINUP_NX + j];
             ai[p * WHEEL_SPINUP_NX + j] = swap;
         }
+        swap = ar[47];
+        ar[47] = ar[p * WHEEL_SPINUP_NX + 7];
+        ar[p * WHEEL_SPINUP_NX + 7] = swap;
+        swap = ai[47];
+        ai[47] = ai[p * WHEEL_SPINUP_NX + 7];
+        ai[p * WHEEL_SPINUP_NX + 7] = swap;
     }
     /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
     re = ar[45];
@@ -5055,6 +5208,484 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
     }
 }
 
+/* dopri5 to t1, with Hairer's step-size strategy: the last step clipped
+   to end on t1, no growth right after a rejection, and a non-finite trial
+   rejected with h shrunk by facmin.
+   Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int dopri5_events(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps,
+                         double (*out)[WHEEL_SPINUP_NX], long capacity, double *log_t,
+                         int *log_k, double (*log_x)[WHEEL_SPINUP_NX], long *nlog,
+                         wheel_spinup_stats *stats)
+{
+    double k[13][WHEEL_SPINUP_NX];
+    double y[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
+    int code;
+    double t;
+    double h;
+    double err_old;
+    int nonfinite;
+    int rejected_last;
+    int last;
+    double err;
+    int run;
+    int take;
+    int lock;
+    int ok;
+    double fac;
+    double grow;
+    double total;
+    double dense[4][WHEEL_SPINUP_NX];
+    double t0;
+    double t1;
+    long g;
+    double told;
+    double hs;
+    double frac;
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_old[1];
+    double ev_new[1];
+    double ev_end[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_j;
+    int ev_need;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int ev_k;
+    int i;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return WHEEL_SPINUP_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    *nlog = 0;
+    code = ode_start(5, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
+    if (code <= WHEEL_SPINUP_ODE_OK) {
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+        wheel_spinup_events(t0, x, c, ev_old);
+    }
+    if (code >= 0) {
+        return code;
+    }
+    code = -1;
+    t = t0;
+    nonfinite = 0;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    err_old = 1e-4;
+    rejected_last = 0;
+    for (;;) {
+
+        /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+        code = code < 0 ? (step_underflow(h,
+                t) ? (nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) : code;
+        last = t + 1.01 * h >= t1;
+        h = code < 0 && last ? t1 - t : h;
+        stats->h = code < 0 ? h : stats->h;
+        told = t;
+        hs = h;
+        if (code >= 0) {
+            return code;
+        }
+
+        /* trial */
+
+        /* stage 2: t + 0.2 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.2 * k[0][i]);
+        }
+        wheel_spinup_rhs(t + 0.2 * h, y, c, k[1]);
+
+        /* stage 3: t + 0.3 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.075 * k[0][i] + 0.225 * k[1][i]);
+        }
+        wheel_spinup_rhs(t + 0.3 * h, y, c, k[2]);
+
+        /* stage 4: t + 0.8 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.9777777777777777 * k[0][i] - 3.7333333333333334 * k[1][i] +
+                    3.5555555555555554 * k[2][i]);
+        }
+        wheel_spinup_rhs(t + 0.8 * h, y, c, k[3]);
+
+        /* stage 5: t + 0.8888888888888888 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (2.9525986892242035 * k[0][i] - 11.595793324188385 * k[1][i] +
+                    9.822892851699436 * k[2][i] - 0.2908093278463649 * k[3][i]);
+        }
+        wheel_spinup_rhs(t + 0.8888888888888888 * h, y, c, k[4]);
+
+        /* stage 6: t + h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (2.8462752525252526 * k[0][i] - 10.757575757575758 * k[1][i] +
+                    8.906422717743473 * k[2][i] + 0.2784090909090909 * k[3][i] -
+                    0.2735313036020583 * k[4][i]);
+        }
+        wheel_spinup_rhs(t + h, y, c, k[5]);
+
+        /* stage 7: t + h, the new solution */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            dx[i] = h * (0.09114583333333333 * k[0][i] + 0.44923629829290207 * k[2][i] +
+                    0.6510416666666666 * k[3][i] - 0.322376179245283 * k[4][i] +
+                    0.13095238095238096 * k[5][i]) - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+        wheel_spinup_rhs(t + h, xnew, c, k[6]);
+
+        /* the error norm (see error_norm) */
+        total = 0.0;
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            double e;
+            e = h * (0.0012326388888888888 * k[0][i] - 0.0042527702905061394 * k[2][i] +
+                    0.03697916666666667 * k[3][i] - 0.05086379716981132 * k[4][i] +
+                    0.0419047619047619 * k[5][i] - 0.025 * k[6][i]) / (atol + rtol * (is_angle[i]
+                    * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) > fabs(x[i]) ?
+                    fabs(xnew[i]) : fabs(x[i])));
+            total = total + e * e;
+        }
+        err = sqrt(total / WHEEL_SPINUP_NX);
+
+        /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+        stats->rhs_calls = stats->rhs_calls + (code < 0 ? 6 : 0);
+        nonfinite = !(fabs(err) <= DBL_MAX);
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
+        }
+
+        /* control: accept or reject by selection, and the next h */
+        run = code < 0;
+        take = run && !nonfinite && err <= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
+                : 0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !lock;
+        fac = pow(err, 0.17) / 0.9;  /* h / h_new, in Hairer's form */
+        grow = dmax(0.1, dmin(5.0, fac / pow(err_old, 0.04)));
+        grow = rejected_last ? dmax(grow, 1.0) : grow;  /* no growth after a rejection */
+        code = take && lock ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                WHEEL_SPINUP_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (run && !take ? 1 : 0);
+        err_old = ok ? dmax(err, 1e-4) : err_old;
+        rejected_last = ok ? 0 : run && !take ? 1 : rejected_last;
+        h = !run || (take && lock) ? h : nonfinite ? h * 0.2 : ok ? h / grow : h / dmin(5.0, fac);
+
+        /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+        if (ok) {
+            wheel_spinup_events(t, xnew, c, ev_end);
+            ev_need = g < ntimes && times[g] < t ? 1 : 0;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
+                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                    ev_need = 1;
+                }
+            }
+            if (ev_need != 0) {
+
+                /* the dense output of order 4 */
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    dense[0][i] = xnew[i] - x[i];
+                    dense[1][i] = hs * k[0][i] - dense[0][i];
+                    dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
+                    dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 *
+                            k[2][i] - 5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i]
+                            - 1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
+                }
+            }
+            ev_stop = t;
+            ev_halt = -1;
+            ev_ta = told;
+            ev_j = 0;
+            for (;;) {
+                if (ev_j >= 1) {
+                    break;
+                }
+                ev_j = ev_j + 1;
+                if (ev_j < 1) {
+                    ev_tb = told + (t - told) * ((double)ev_j / 1.0);
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
+                                told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
+                                (1.0 - (ev_tb - told) / hs) * dense[3][i])));
+                    }
+                    wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_g[ev_k];
+                    }
+                } else {
+                    ev_tb = t;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_end[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_t[ev_k] = DBL_MAX;
+                    if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_new[ev_k] >= 0.0) ||
+                            (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_new[ev_k] <= 0.0)) {
+                        ev_a = ev_ta;
+                        ev_b = ev_tb;
+                        ev_ga = ev_old[ev_k];
+                        ev_gb = ev_new[ev_k];
+                        ev_side = 0;
+                        ev_it = 0;
+                        for (;;) {
+                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                break;
+                            }
+                            ev_it = ev_it + 1;
+                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                break;
+                            }
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 - (ev_m
+                                        - told) / hs) * (dense[1][i] + (ev_m - told) / hs *
+                                        (dense[2][i] + (1.0 - (ev_m - told) / hs) * dense[3][i])));
+                            }
+                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                            ev_gm = ev_g[ev_k];
+                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                    0.0))) {
+                                ev_a = ev_m;
+                                ev_ga = ev_gm;
+                                if (ev_side == -1) {
+                                    ev_gb = 0.5 * ev_gb;
+                                }
+                                ev_side = -1;
+                            } else {
+                                ev_b = ev_m;
+                                ev_gb = ev_gm;
+                                if (ev_side == 1) {
+                                    ev_ga = 0.5 * ev_ga;
+                                }
+                                ev_side = 1;
+                            }
+                        }
+                        ev_t[ev_k] = ev_b;
+                    } else {
+                        if ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <= DBL_MAX)) {
+                            ev_f = ev_ta;
+                            ev_gf = ev_old[ev_k];
+                            ev_b = ev_tb;
+                            ev_it = 0;
+                            for (;;) {
+                                if (ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 -
+                                            (ev_m - told) / hs) * (dense[1][i] + (ev_m - told) /
+                                            hs * (dense[2][i] + (1.0 - (ev_m - told) / hs) *
+                                            dense[3][i])));
+                                }
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                    ev_f = ev_m;
+                                    ev_gf = ev_g[ev_k];
+                                } else {
+                                    ev_b = ev_m;
+                                }
+                            }
+                            if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_gf >= 0.0) ||
+                                    (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_gf <= 0.0)) {
+                                ev_a = ev_ta;
+                                ev_b = ev_f;
+                                ev_ga = ev_old[ev_k];
+                                ev_gb = ev_gf;
+                                ev_side = 0;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
+                                                - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
+                                                told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
+                                                / hs) * dense[3][i])));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    ev_gm = ev_g[ev_k];
+                                    if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                            !(ev_ga > 0.0))) {
+                                        ev_a = ev_m;
+                                        ev_ga = ev_gm;
+                                        if (ev_side == -1) {
+                                            ev_gb = 0.5 * ev_gb;
+                                        }
+                                        ev_side = -1;
+                                    } else {
+                                        ev_b = ev_m;
+                                        ev_gb = ev_gm;
+                                        if (ev_side == 1) {
+                                            ev_ga = 0.5 * ev_ga;
+                                        }
+                                        ev_side = 1;
+                                    }
+                                }
+                                ev_t[ev_k] = ev_b;
+                            }
+                        }
+                    }
+                }
+                for (;;) {
+                    ev_best = -1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] < ev_t[ev_best])) {
+                            ev_best = ev_k;
+                        }
+                    }
+                    if (ev_best < 0) {
+                        break;
+                    }
+                    if (*nlog >= capacity) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                        break;
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = x[i] + (ev_t[ev_best] - told) / hs * (dense[0][i] + (1.0 -
+                                (ev_t[ev_best] - told) / hs) * (dense[1][i] + (ev_t[ev_best] -
+                                told) / hs * (dense[2][i] + (1.0 - (ev_t[ev_best] - told) / hs) *
+                                dense[3][i])));
+                    }
+                    log_t[*nlog] = ev_t[ev_best];
+                    log_k[*nlog] = ev_best;
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        log_x[*nlog][i] = ev_y[i];
+                    }
+                    *nlog = *nlog + 1;
+                    if (ev_term[ev_best] != 0) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                        break;
+                    }
+                    ev_t[ev_best] = DBL_MAX;
+                }
+                if (ev_halt >= 0) {
+                    break;
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_old[ev_k] = ev_new[ev_k];
+                }
+                ev_ta = ev_tb;
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < ev_stop)) {
+                    break;
+                }
+                frac = (times[g] - told) / hs;
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                            (dense[2][i] + (1.0 - frac) * dense[3][i])));
+                }
+                g = g + 1;
+            }
+            if (ev_halt >= 0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] + (ev_stop - told) / hs * (dense[0][i] + (1.0 - (ev_stop -
+                            told) / hs) * (dense[1][i] + (ev_stop - told) / hs * (dense[2][i] +
+                            (1.0 - (ev_stop - told) / hs) * dense[3][i])));
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    x[i] = ev_y[i];
+                }
+                t = ev_stop;
+                stats->t = t;
+                if (g < ntimes) {
+                    if (times[g] <= t) {
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            out[g][i] = x[i];
+                        }
+                        g = g + 1;
+                    }
+                }
+                return ev_halt;
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                k[0][i] = k[6][i];
+            }
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+        }
+        if (code >= 0) {
+            return code;
+        }
+    }
+}
+
 /* Dormand-Prince 5(4), adaptive, PI step-size control. */
 int wheel_spinup_dopri5(double t0, double t1, double *x, const double *c, double rtol,
                         double atol, double h0, long max_steps, wheel_spinup_stats *stats)
@@ -5071,6 +5702,47 @@ int wheel_spinup_dopri5_grid(long ntimes, const double *times, double *x, const 
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
+}
+
+/* Dormand-Prince 5(4), adaptive, PI step-size control. Over an output grid, with the scene's events located (see wheel_spinup_ode.h). */
+int wheel_spinup_dopri5_events(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               long capacity, double *log_t, int *log_k, double *log_x,
+                               long *nlog, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return dopri5_events(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+            (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Each state its _events call, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+size_t wheel_spinup_dopri5_events_batch(size_t n, long ntimes, const double *times, double *x,
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, long capacity,
+                                        double *log_t, int *log_k, double *log_x, long *nlog,
+                                        wheel_spinup_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const size_t room = capacity > 0 ? (size_t)capacity : 0;
+        const int code = wheel_spinup_dopri5_events(ntimes, times,
+                x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * WHEEL_SPINUP_NX, capacity, log_t + (size_t)i * room,
+                log_k + (size_t)i * room, log_x + (size_t)i * room * WHEEL_SPINUP_NX, nlog + i,
+                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
@@ -5674,6 +6346,613 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
     }
 }
 
+/* dop853 to t1, with Hairer's step-size strategy: the last step clipped
+   to end on t1, no growth right after a rejection, and a non-finite trial
+   rejected with h shrunk by facmin.
+   Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int dop853_events(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps,
+                         double (*out)[WHEEL_SPINUP_NX], long capacity, double *log_t,
+                         int *log_k, double (*log_x)[WHEEL_SPINUP_NX], long *nlog,
+                         wheel_spinup_stats *stats)
+{
+    double k[16][WHEEL_SPINUP_NX];
+    double y[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
+    int code;
+    double t;
+    double h;
+    double err_old;
+    int nonfinite;
+    int rejected_last;
+    int last;
+    double err;
+    int run;
+    int take;
+    int lock;
+    int ok;
+    double fac;
+    double grow;
+    double err5;
+    double err3;
+    double deno;
+    double dense[7][WHEEL_SPINUP_NX];
+    double t0;
+    double t1;
+    long g;
+    double told;
+    double hs;
+    double frac;
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_old[1];
+    double ev_new[1];
+    double ev_end[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_j;
+    int ev_need;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int ev_k;
+    int i;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return WHEEL_SPINUP_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    *nlog = 0;
+    code = ode_start(8, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k[0],
+            &h, stats);
+    if (code <= WHEEL_SPINUP_ODE_OK) {
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+        wheel_spinup_events(t0, x, c, ev_old);
+    }
+    if (code >= 0) {
+        return code;
+    }
+    code = -1;
+    t = t0;
+    nonfinite = 0;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    err_old = 1e-4;
+    rejected_last = 0;
+    for (;;) {
+
+        /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+        code = code < 0 ? (step_underflow(h,
+                t) ? (nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) : code;
+        last = t + 1.01 * h >= t1;
+        h = code < 0 && last ? t1 - t : h;
+        stats->h = code < 0 ? h : stats->h;
+        told = t;
+        hs = h;
+        if (code >= 0) {
+            return code;
+        }
+
+        /* trial */
+
+        /* stage 2: t + 0.05260015195876773 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.05260015195876773 * k[0][i]);
+        }
+        wheel_spinup_rhs(t + 0.05260015195876773 * h, y, c, k[1]);
+
+        /* stage 3: t + 0.0789002279381516 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.0197250569845379 * k[0][i] + 0.0591751709536137 * k[1][i]);
+        }
+        wheel_spinup_rhs(t + 0.0789002279381516 * h, y, c, k[2]);
+
+        /* stage 4: t + 0.1183503419072274 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.02958758547680685 * k[0][i] + 0.08876275643042054 * k[2][i]);
+        }
+        wheel_spinup_rhs(t + 0.1183503419072274 * h, y, c, k[3]);
+
+        /* stage 5: t + 0.2816496580927726 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.2413651341592667 * k[0][i] - 0.8845494793282861 * k[2][i] +
+                    0.924834003261792 * k[3][i]);
+        }
+        wheel_spinup_rhs(t + 0.2816496580927726 * h, y, c, k[4]);
+
+        /* stage 6: t + 0.3333333333333333 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.037037037037037035 * k[0][i] + 0.17082860872947386 * k[3][i] +
+                    0.12546768756682242 * k[4][i]);
+        }
+        wheel_spinup_rhs(t + 0.3333333333333333 * h, y, c, k[5]);
+
+        /* stage 7: t + 0.25 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.037109375 * k[0][i] + 0.17025221101954405 * k[3][i] +
+                    0.06021653898045596 * k[4][i] - 0.017578125 * k[5][i]);
+        }
+        wheel_spinup_rhs(t + 0.25 * h, y, c, k[6]);
+
+        /* stage 8: t + 0.3076923076923077 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.03709200011850479 * k[0][i] + 0.17038392571223998 * k[3][i] +
+                    0.10726203044637328 * k[4][i] - 0.015319437748624402 * k[5][i] +
+                    0.008273789163814023 * k[6][i]);
+        }
+        wheel_spinup_rhs(t + 0.3076923076923077 * h, y, c, k[7]);
+
+        /* stage 9: t + 0.6512820512820513 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.6241109587160757 * k[0][i] - 3.3608926294469414 * k[3][i] -
+                    0.868219346841726 * k[4][i] + 27.59209969944671 * k[5][i] +
+                    20.154067550477894 * k[6][i] - 43.48988418106996 * k[7][i]);
+        }
+        wheel_spinup_rhs(t + 0.6512820512820513 * h, y, c, k[8]);
+
+        /* stage 10: t + 0.6 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (0.47766253643826434 * k[0][i] - 2.4881146199716677 * k[3][i] -
+                    0.590290826836843 * k[4][i] + 21.230051448181193 * k[5][i] +
+                    15.279233632882423 * k[6][i] - 33.28821096898486 * k[7][i] -
+                    0.020331201708508627 * k[8][i]);
+        }
+        wheel_spinup_rhs(t + 0.6 * h, y, c, k[9]);
+
+        /* stage 11: t + 0.8571428571428571 h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (-0.9371424300859873 * k[0][i] + 5.186372428844064 * k[3][i] +
+                    1.0914373489967295 * k[4][i] - 8.149787010746927 * k[5][i] -
+                    18.52006565999696 * k[6][i] + 22.739487099350505 * k[7][i] +
+                    2.4936055526796523 * k[8][i] - 3.0467644718982196 * k[9][i]);
+        }
+        wheel_spinup_rhs(t + 0.8571428571428571 * h, y, c, k[10]);
+
+        /* stage 12: t + h */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            y[i] = x[i] + h * (2.273310147516538 * k[0][i] - 10.53449546673725 * k[3][i] -
+                    2.0008720582248625 * k[4][i] - 17.9589318631188 * k[5][i] + 27.94888452941996
+                    * k[6][i] - 2.8589982771350235 * k[7][i] - 8.87285693353063 * k[8][i] +
+                    12.360567175794303 * k[9][i] + 0.6433927460157636 * k[10][i]);
+        }
+        wheel_spinup_rhs(t + h, y, c, k[11]);
+
+        /* the new solution */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            dx[i] = h * (0.054293734116568765 * k[0][i] + 4.450312892752409 * k[5][i] +
+                    1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] +
+                    0.3111643669578199 * k[8][i] - 0.1521609496625161 * k[9][i] +
+                    0.20136540080403034 * k[10][i] + 0.04471061572777259 * k[11][i]) - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+
+        /* the error: DOP853's two estimates, combined */
+        err5 = 0.0;
+        err3 = 0.0;
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            double e5, e3;
+            e5 = (0.01312004499419488 * k[0][i] - 1.2251564463762044 * k[5][i] -
+                    0.4957589496572502 * k[6][i] + 1.6643771824549864 * k[7][i] -
+                    0.35032884874997366 * k[8][i] + 0.3341791187130175 * k[9][i] +
+                    0.08192320648511571 * k[10][i] - 0.022355307863886294 * k[11][i]) / (atol +
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+            e3 = (-0.18980075407240762 * k[0][i] + 4.450312892752409 * k[5][i] +
+                    1.8915178993145003 * k[6][i] - 5.801203960010585 * k[7][i] -
+                    0.4226823213237919 * k[8][i] - 0.1521609496625161 * k[9][i] +
+                    0.20136540080403034 * k[10][i] + 0.02265179219836082 * k[11][i]) / (atol +
+                    rtol * (is_angle[i] * (fabs(xnew[i]) > fabs(x[i]) ? fabs(xnew[i]) :
+                    fabs(x[i])) > 3.141592653589793 ? 3.141592653589793 : fabs(xnew[i]) >
+                    fabs(x[i]) ? fabs(xnew[i]) : fabs(x[i])));
+            err5 = err5 + e5 * e5;
+            err3 = err3 + e3 * e3;
+        }
+        deno = err5 + 1e-2 * err3;
+        err = deno > 0.0 ? fabs(h) * err5 / sqrt(WHEEL_SPINUP_NX * deno) : 0.0;
+
+        /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+        stats->rhs_calls = stats->rhs_calls + (code < 0 ? 11 : 0);
+        nonfinite = !(fabs(err) <= DBL_MAX);
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
+        }
+        ok = code < 0 && !nonfinite && err <= 1.0;
+        if (ok) {
+            wheel_spinup_rhs(t + h, xnew, c, k[12]);  /* where the next step starts */
+        }
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            nonfinite = nonfinite || (ok && !(fabs(k[12][i]) <= DBL_MAX));
+        }
+        stats->rhs_calls = stats->rhs_calls + (ok ? 1 : 0);
+
+        /* control: accept or reject by selection, and the next h */
+        run = code < 0;
+        take = run && !nonfinite && err <= 1.0;
+        lock = (xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
+                : 0) || fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !lock;
+        fac = sqrt(sqrt(sqrt(err))) / 0.9;  /* h / h_new, in Hairer's form */
+        grow = dmax(0.16666666666666666, dmin(3.003003003003003, fac));
+        grow = rejected_last ? dmax(grow, 1.0) : grow;  /* no growth after a rejection */
+        code = take && lock ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                WHEEL_SPINUP_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (run && !take ? 1 : 0);
+        err_old = ok ? dmax(err, 1e-4) : err_old;
+        rejected_last = ok ? 0 : run && !take ? 1 : rejected_last;
+        h = !run || (take && lock) ? h : nonfinite ? h * 0.333 : ok ? h / grow : h /
+                dmin(3.003003003003003, fac);
+
+        /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+        if (ok) {
+            wheel_spinup_events(t, xnew, c, ev_end);
+            ev_need = g < ntimes && times[g] < t ? 1 : 0;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
+                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                    ev_need = 1;
+                }
+            }
+            if (ev_need != 0) {
+
+                /* the dense output of order 7 */
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
+                            k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 *
+                            k[8][i] + 0.15329179827876568 * k[9][i] + 0.00820105229563469 *
+                            k[10][i] + 0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
+                }
+                wheel_spinup_rhs(told + 0.1 * hs, y, c, k[13]);
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
+                            k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 *
+                            k[7][i] - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 *
+                            k[11][i] - 0.00034046500868740456 * k[12][i] + 0.1413124436746325 *
+                            k[13][i]);
+                }
+                wheel_spinup_rhs(told + 0.2 * hs, y, c, k[14]);
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 *
+                            k[5][i] + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
+                            0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
+                            2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
+                }
+                wheel_spinup_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
+                stats->rhs_calls = stats->rhs_calls + 3;
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    dense[0][i] = xnew[i] - x[i];
+                    dense[1][i] = hs * k[0][i] - dense[0][i];
+                    dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
+                    dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 *
+                            k[5][i] - 3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
+                            2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
+                            2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
+                            0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
+                            9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
+                    dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 *
+                            k[5][i] + 165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i]
+                            - 22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
+                            30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
+                            15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
+                            9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
+                    dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 *
+                            k[5][i] - 189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i]
+                            - 11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
+                            1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
+                            2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
+                            84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
+                    dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 *
+                            k[5][i] - 231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
+                            93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
+                            104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
+                            43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
+                            39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
+                }
+            }
+            ev_stop = t;
+            ev_halt = -1;
+            ev_ta = told;
+            ev_j = 0;
+            for (;;) {
+                if (ev_j >= 1) {
+                    break;
+                }
+                ev_j = ev_j + 1;
+                if (ev_j < 1) {
+                    ev_tb = told + (t - told) * ((double)ev_j / 1.0);
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
+                                told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
+                                (1.0 - (ev_tb - told) / hs) * (dense[3][i] + (ev_tb - told) / hs
+                                * (dense[4][i] + (1.0 - (ev_tb - told) / hs) * (dense[5][i] +
+                                (ev_tb - told) / hs * dense[6][i]))))));
+                    }
+                    wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_g[ev_k];
+                    }
+                } else {
+                    ev_tb = t;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_end[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_t[ev_k] = DBL_MAX;
+                    if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_new[ev_k] >= 0.0) ||
+                            (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_new[ev_k] <= 0.0)) {
+                        ev_a = ev_ta;
+                        ev_b = ev_tb;
+                        ev_ga = ev_old[ev_k];
+                        ev_gb = ev_new[ev_k];
+                        ev_side = 0;
+                        ev_it = 0;
+                        for (;;) {
+                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                break;
+                            }
+                            ev_it = ev_it + 1;
+                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                break;
+                            }
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 - (ev_m
+                                        - told) / hs) * (dense[1][i] + (ev_m - told) / hs *
+                                        (dense[2][i] + (1.0 - (ev_m - told) / hs) * (dense[3][i]
+                                        + (ev_m - told) / hs * (dense[4][i] + (1.0 - (ev_m -
+                                        told) / hs) * (dense[5][i] + (ev_m - told) / hs *
+                                        dense[6][i]))))));
+                            }
+                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                            ev_gm = ev_g[ev_k];
+                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                    0.0))) {
+                                ev_a = ev_m;
+                                ev_ga = ev_gm;
+                                if (ev_side == -1) {
+                                    ev_gb = 0.5 * ev_gb;
+                                }
+                                ev_side = -1;
+                            } else {
+                                ev_b = ev_m;
+                                ev_gb = ev_gm;
+                                if (ev_side == 1) {
+                                    ev_ga = 0.5 * ev_ga;
+                                }
+                                ev_side = 1;
+                            }
+                        }
+                        ev_t[ev_k] = ev_b;
+                    } else {
+                        if ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <= DBL_MAX)) {
+                            ev_f = ev_ta;
+                            ev_gf = ev_old[ev_k];
+                            ev_b = ev_tb;
+                            ev_it = 0;
+                            for (;;) {
+                                if (ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 -
+                                            (ev_m - told) / hs) * (dense[1][i] + (ev_m - told) /
+                                            hs * (dense[2][i] + (1.0 - (ev_m - told) / hs) *
+                                            (dense[3][i] + (ev_m - told) / hs * (dense[4][i] +
+                                            (1.0 - (ev_m - told) / hs) * (dense[5][i] + (ev_m -
+                                            told) / hs * dense[6][i]))))));
+                                }
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                    ev_f = ev_m;
+                                    ev_gf = ev_g[ev_k];
+                                } else {
+                                    ev_b = ev_m;
+                                }
+                            }
+                            if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_gf >= 0.0) ||
+                                    (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_gf <= 0.0)) {
+                                ev_a = ev_ta;
+                                ev_b = ev_f;
+                                ev_ga = ev_old[ev_k];
+                                ev_gb = ev_gf;
+                                ev_side = 0;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
+                                                - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
+                                                told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
+                                                / hs) * (dense[3][i] + (ev_m - told) / hs *
+                                                (dense[4][i] + (1.0 - (ev_m - told) / hs) *
+                                                (dense[5][i] + (ev_m - told) / hs *
+                                                dense[6][i]))))));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    ev_gm = ev_g[ev_k];
+                                    if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                            !(ev_ga > 0.0))) {
+                                        ev_a = ev_m;
+                                        ev_ga = ev_gm;
+                                        if (ev_side == -1) {
+                                            ev_gb = 0.5 * ev_gb;
+                                        }
+                                        ev_side = -1;
+                                    } else {
+                                        ev_b = ev_m;
+                                        ev_gb = ev_gm;
+                                        if (ev_side == 1) {
+                                            ev_ga = 0.5 * ev_ga;
+                                        }
+                                        ev_side = 1;
+                                    }
+                                }
+                                ev_t[ev_k] = ev_b;
+                            }
+                        }
+                    }
+                }
+                for (;;) {
+                    ev_best = -1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] < ev_t[ev_best])) {
+                            ev_best = ev_k;
+                        }
+                    }
+                    if (ev_best < 0) {
+                        break;
+                    }
+                    if (*nlog >= capacity) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                        break;
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = x[i] + (ev_t[ev_best] - told) / hs * (dense[0][i] + (1.0 -
+                                (ev_t[ev_best] - told) / hs) * (dense[1][i] + (ev_t[ev_best] -
+                                told) / hs * (dense[2][i] + (1.0 - (ev_t[ev_best] - told) / hs) *
+                                (dense[3][i] + (ev_t[ev_best] - told) / hs * (dense[4][i] + (1.0
+                                - (ev_t[ev_best] - told) / hs) * (dense[5][i] + (ev_t[ev_best] -
+                                told) / hs * dense[6][i]))))));
+                    }
+                    log_t[*nlog] = ev_t[ev_best];
+                    log_k[*nlog] = ev_best;
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        log_x[*nlog][i] = ev_y[i];
+                    }
+                    *nlog = *nlog + 1;
+                    if (ev_term[ev_best] != 0) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                        break;
+                    }
+                    ev_t[ev_best] = DBL_MAX;
+                }
+                if (ev_halt >= 0) {
+                    break;
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_old[ev_k] = ev_new[ev_k];
+                }
+                ev_ta = ev_tb;
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < ev_stop)) {
+                    break;
+                }
+                frac = (times[g] - told) / hs;
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                            (dense[2][i] + (1.0 - frac) * (dense[3][i] + frac * (dense[4][i] +
+                            (1.0 - frac) * (dense[5][i] + frac * dense[6][i]))))));
+                }
+                g = g + 1;
+            }
+            if (ev_halt >= 0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] + (ev_stop - told) / hs * (dense[0][i] + (1.0 - (ev_stop -
+                            told) / hs) * (dense[1][i] + (ev_stop - told) / hs * (dense[2][i] +
+                            (1.0 - (ev_stop - told) / hs) * (dense[3][i] + (ev_stop - told) / hs
+                            * (dense[4][i] + (1.0 - (ev_stop - told) / hs) * (dense[5][i] +
+                            (ev_stop - told) / hs * dense[6][i]))))));
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    x[i] = ev_y[i];
+                }
+                t = ev_stop;
+                stats->t = t;
+                if (g < ntimes) {
+                    if (times[g] <= t) {
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            out[g][i] = x[i];
+                        }
+                        g = g + 1;
+                    }
+                }
+                return ev_halt;
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                k[0][i] = k[12][i];
+            }
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+        }
+        if (code >= 0) {
+            return code;
+        }
+    }
+}
+
 /* DOP853 (Hairer's coefficients and error estimator), adaptive. */
 int wheel_spinup_dop853(double t0, double t1, double *x, const double *c, double rtol,
                         double atol, double h0, long max_steps, wheel_spinup_stats *stats)
@@ -5690,6 +6969,47 @@ int wheel_spinup_dop853_grid(long ntimes, const double *times, double *x, const 
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
+}
+
+/* DOP853 (Hairer's coefficients and error estimator), adaptive. Over an output grid, with the scene's events located (see wheel_spinup_ode.h). */
+int wheel_spinup_dop853_events(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               long capacity, double *log_t, int *log_k, double *log_x,
+                               long *nlog, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return dop853_events(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+            (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Each state its _events call, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+size_t wheel_spinup_dop853_events_batch(size_t n, long ntimes, const double *times, double *x,
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, long capacity,
+                                        double *log_t, int *log_k, double *log_x, long *nlog,
+                                        wheel_spinup_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const size_t room = capacity > 0 ? (size_t)capacity : 0;
+        const int code = wheel_spinup_dop853_events(ntimes, times,
+                x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * WHEEL_SPINUP_NX, capacity, log_t + (size_t)i * room,
+                log_k + (size_t)i * room, log_x + (size_t)i * room * WHEEL_SPINUP_NX, nlog + i,
+                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
@@ -5981,12 +7301,7 @@ static int rodas4_integrate(double t0, double t1, double *x, const double *c, do
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            lu[i * WHEEL_SPINUP_NX + i] = lu[i * WHEEL_SPINUP_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6143,12 +7458,7 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
         stats->h = h;
 
         /* E = I/(h gamma) - J */
-        for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
-            lu[i] = -J[i];
-        }
-        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-            lu[i * WHEEL_SPINUP_NX + i] = lu[i * WHEEL_SPINUP_NX + i] + 1.0 / (h * 0.25);
-        }
+        lu_shift(J, 1.0 / (h * 0.25), lu);
         stats->decompositions = stats->decompositions + 1;
         if (lu_decompose(lu, piv)) {
             stats->rejected = stats->rejected + 1;
@@ -6233,6 +7543,439 @@ static int rodas4_grid(long ntimes, const double *times, double *x, const double
     }
 }
 
+/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+   J and f are evaluated once per accepted step; a rejected step only
+   refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
+   err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
+   accepted step.
+   A singular E is retried with h times 0.5, 5 times in a row at most.
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int rodas4_events(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps,
+                         double (*out)[WHEEL_SPINUP_NX], long capacity, double *log_t,
+                         int *log_k, double (*log_x)[WHEEL_SPINUP_NX], long *nlog,
+                         wheel_spinup_stats *stats)
+{
+    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double lu[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double k[6][WHEEL_SPINUP_NX];
+    double f0[WHEEL_SPINUP_NX];
+    double fnew[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
+    int piv[WHEEL_SPINUP_NX];
+    double t;
+    double h;
+    double err;
+    double fac;
+    double gus;
+    double h_acc;
+    double err_acc;
+    int last;
+    int rejected_last;
+    int nonfinite;
+    int new_point;
+    int singular;
+    int start;
+    double dense[2][WHEEL_SPINUP_NX];
+    double t0;
+    double t1;
+    long g;
+    double frac;
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_old[1];
+    double ev_new[1];
+    double ev_end[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_j;
+    int ev_need;
+    int ev_k;
+    int i;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return WHEEL_SPINUP_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    *nlog = 0;
+    start = ode_start(4, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0,
+            &h, stats);
+    if (start <= WHEEL_SPINUP_ODE_OK) {
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+        wheel_spinup_events(t0, x, c, ev_old);
+    }
+    if (start >= 0) {
+        return start;
+    }
+    t = t0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    rejected_last = 0;
+    nonfinite = 0;
+    singular = 0;
+    new_point = 1;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    for (;;) {
+        if (new_point) {
+            wheel_spinup_jac(t, x, c, J);
+            stats->jac_calls = stats->jac_calls + 1;
+            if (!all_finite(J, WHEEL_SPINUP_NX * WHEEL_SPINUP_NX)) {
+                return WHEEL_SPINUP_ODE_ERR_NONFINITE;
+            }
+            new_point = 0;
+        }
+        if (step_underflow(h, t)) {
+            return nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return WHEEL_SPINUP_ODE_ERR_MAX_STEPS;
+        }
+        last = t + 1.01 * h >= t1;
+        if (last) {
+            h = t1 - t;
+        }
+        stats->h = h;
+
+        /* E = I/(h gamma) - J */
+        lu_shift(J, 1.0 / (h * 0.25), lu);
+        stats->decompositions = stats->decompositions + 1;
+        if (lu_decompose(lu, piv)) {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+            singular = singular + 1;
+            if (singular == 5) {
+                return WHEEL_SPINUP_ODE_ERR_SINGULAR;
+            }
+            h = h * 0.5;
+            continue;
+        }
+        singular = 0;
+        err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense);
+        stats->rhs_calls = stats->rhs_calls + 5;
+        nonfinite = !(fabs(err) <= DBL_MAX) || !all_finite(xnew, WHEEL_SPINUP_NX);
+        if (!nonfinite && err <= 1.0 && !last) {
+            wheel_spinup_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
+            stats->rhs_calls = stats->rhs_calls + 1;
+            nonfinite = !all_finite(fnew, WHEEL_SPINUP_NX);
+        }
+        if (nonfinite) {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+            h = h * 0.2;
+            continue;
+        }
+        fac = dmax(0.16666666666666666, dmin(5.0, pow(err, 0.25) / 0.9));  /* h / h_new */
+        if (err <= 1.0) {
+            if (gimbal_lock(x, xnew)) {
+                return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            if (stats->accepted > 0) {
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                fac = dmax(fac, dmax(0.16666666666666666, dmin(5.0, gus)));
+            }
+            h_acc = h;
+            err_acc = dmax(1e-2, err);
+            wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);
+            ev_need = g < ntimes && times[g] < (last ? t1 : t + h) ? 1 : 0;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
+                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                    ev_need = 1;
+                }
+            }
+            if (ev_need != 0) {
+            }
+            ev_stop = last ? t1 : t + h;
+            ev_halt = -1;
+            ev_ta = t;
+            ev_j = 0;
+            for (;;) {
+                if (ev_j >= 1) {
+                    break;
+                }
+                ev_j = ev_j + 1;
+                if (ev_j < 1) {
+                    ev_tb = t + ((last ? t1 : t + h) - t) * ((double)ev_j / 1.0);
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = x[i] * (1.0 - (ev_tb - t) / h) + (ev_tb - t) / h * (xnew[i] +
+                                (1.0 - (ev_tb - t) / h) * (dense[0][i] + (ev_tb - t) / h *
+                                dense[1][i]));
+                    }
+                    wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_g[ev_k];
+                    }
+                } else {
+                    ev_tb = last ? t1 : t + h;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_end[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_t[ev_k] = DBL_MAX;
+                    if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_new[ev_k] >= 0.0) ||
+                            (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_new[ev_k] <= 0.0)) {
+                        ev_a = ev_ta;
+                        ev_b = ev_tb;
+                        ev_ga = ev_old[ev_k];
+                        ev_gb = ev_new[ev_k];
+                        ev_side = 0;
+                        ev_it = 0;
+                        for (;;) {
+                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                break;
+                            }
+                            ev_it = ev_it + 1;
+                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                break;
+                            }
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h *
+                                        (xnew[i] + (1.0 - (ev_m - t) / h) * (dense[0][i] + (ev_m
+                                        - t) / h * dense[1][i]));
+                            }
+                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                            ev_gm = ev_g[ev_k];
+                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                    0.0))) {
+                                ev_a = ev_m;
+                                ev_ga = ev_gm;
+                                if (ev_side == -1) {
+                                    ev_gb = 0.5 * ev_gb;
+                                }
+                                ev_side = -1;
+                            } else {
+                                ev_b = ev_m;
+                                ev_gb = ev_gm;
+                                if (ev_side == 1) {
+                                    ev_ga = 0.5 * ev_ga;
+                                }
+                                ev_side = 1;
+                            }
+                        }
+                        ev_t[ev_k] = ev_b;
+                    } else {
+                        if ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <= DBL_MAX)) {
+                            ev_f = ev_ta;
+                            ev_gf = ev_old[ev_k];
+                            ev_b = ev_tb;
+                            ev_it = 0;
+                            for (;;) {
+                                if (ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h *
+                                            (xnew[i] + (1.0 - (ev_m - t) / h) * (dense[0][i] +
+                                            (ev_m - t) / h * dense[1][i]));
+                                }
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                    ev_f = ev_m;
+                                    ev_gf = ev_g[ev_k];
+                                } else {
+                                    ev_b = ev_m;
+                                }
+                            }
+                            if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_gf >= 0.0) ||
+                                    (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_gf <= 0.0)) {
+                                ev_a = ev_ta;
+                                ev_b = ev_f;
+                                ev_ga = ev_old[ev_k];
+                                ev_gb = ev_gf;
+                                ev_side = 0;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h
+                                                * (xnew[i] + (1.0 - (ev_m - t) / h) *
+                                                (dense[0][i] + (ev_m - t) / h * dense[1][i]));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    ev_gm = ev_g[ev_k];
+                                    if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                            !(ev_ga > 0.0))) {
+                                        ev_a = ev_m;
+                                        ev_ga = ev_gm;
+                                        if (ev_side == -1) {
+                                            ev_gb = 0.5 * ev_gb;
+                                        }
+                                        ev_side = -1;
+                                    } else {
+                                        ev_b = ev_m;
+                                        ev_gb = ev_gm;
+                                        if (ev_side == 1) {
+                                            ev_ga = 0.5 * ev_ga;
+                                        }
+                                        ev_side = 1;
+                                    }
+                                }
+                                ev_t[ev_k] = ev_b;
+                            }
+                        }
+                    }
+                }
+                for (;;) {
+                    ev_best = -1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] < ev_t[ev_best])) {
+                            ev_best = ev_k;
+                        }
+                    }
+                    if (ev_best < 0) {
+                        break;
+                    }
+                    if (*nlog >= capacity) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                        break;
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = x[i] * (1.0 - (ev_t[ev_best] - t) / h) + (ev_t[ev_best] - t) /
+                                h * (xnew[i] + (1.0 - (ev_t[ev_best] - t) / h) * (dense[0][i] +
+                                (ev_t[ev_best] - t) / h * dense[1][i]));
+                    }
+                    log_t[*nlog] = ev_t[ev_best];
+                    log_k[*nlog] = ev_best;
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        log_x[*nlog][i] = ev_y[i];
+                    }
+                    *nlog = *nlog + 1;
+                    if (ev_term[ev_best] != 0) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                        break;
+                    }
+                    ev_t[ev_best] = DBL_MAX;
+                }
+                if (ev_halt >= 0) {
+                    break;
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_old[ev_k] = ev_new[ev_k];
+                }
+                ev_ta = ev_tb;
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < ev_stop)) {
+                    break;
+                }
+                frac = (times[g] - t) / h;
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    out[g][i] = x[i] * (1.0 - frac) + frac * (xnew[i] + (1.0 - frac) *
+                            (dense[0][i] + frac * dense[1][i]));
+                }
+                g = g + 1;
+            }
+            if (ev_halt >= 0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] * (1.0 - (ev_stop - t) / h) + (ev_stop - t) / h * (xnew[i] +
+                            (1.0 - (ev_stop - t) / h) * (dense[0][i] + (ev_stop - t) / h *
+                            dense[1][i]));
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    x[i] = ev_y[i];
+                }
+                t = ev_stop;
+                stats->t = t;
+                stats->accepted = stats->accepted + 1;
+                if (g < ntimes) {
+                    if (times[g] <= t) {
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            out[g][i] = x[i];
+                        }
+                        g = g + 1;
+                    }
+                }
+                return ev_halt;
+            }
+            accept_step(x, xnew, dx, comp);
+            t = last ? t1 : t + h;
+            stats->t = t;
+            stats->accepted = stats->accepted + 1;
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+            if (last) {
+                return WHEEL_SPINUP_ODE_OK;
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                f0[i] = fnew[i];
+            }
+            new_point = 1;
+            if (rejected_last) {
+                fac = dmax(fac, 1.0);
+            }
+            rejected_last = 0;
+        } else {
+            stats->rejected = stats->rejected + 1;
+            rejected_last = 1;
+        }
+        h = h / fac;
+    }
+}
+
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. */
 int wheel_spinup_rodas4(double t0, double t1, double *x, const double *c, double rtol,
                         double atol, double h0, long max_steps, wheel_spinup_stats *stats)
@@ -6249,6 +7992,47 @@ int wheel_spinup_rodas4_grid(long ntimes, const double *times, double *x, const 
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
+}
+
+/* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian. Over an output grid, with the scene's events located (see wheel_spinup_ode.h). */
+int wheel_spinup_rodas4_events(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               long capacity, double *log_t, int *log_k, double *log_x,
+                               long *nlog, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return rodas4_events(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+            (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Each state its _events call, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+size_t wheel_spinup_rodas4_events_batch(size_t n, long ntimes, const double *times, double *x,
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, long capacity,
+                                        double *log_t, int *log_k, double *log_x, long *nlog,
+                                        wheel_spinup_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const size_t room = capacity > 0 ? (size_t)capacity : 0;
+        const int code = wheel_spinup_rodas4_events(ntimes, times,
+                x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * WHEEL_SPINUP_NX, capacity, log_t + (size_t)i * room,
+                log_k + (size_t)i * room, log_x + (size_t)i * room * WHEEL_SPINUP_NX, nlog + i,
+                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes
@@ -6286,23 +8070,8 @@ size_t wheel_spinup_rodas4_grid_batch(size_t n, long ntimes, const double *times
 static inline int radau5_factor(const double *J, double h, double *e1, int *piv1, double *e2r,
                                 double *e2i, int *piv2)
 {
-    double gamma_h;
-    double alpha_h;
-    int i;
-
-    gamma_h = 3.637834252744496 / h;
-    alpha_h = 2.6810828736277523 / h;
-    for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
-        e1[i] = -J[i];
-        e2r[i] = -J[i];
-        e2i[i] = 0.0;
-    }
-    #pragma GCC unroll 1
-    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-        e1[i * WHEEL_SPINUP_NX + i] = e1[i * WHEEL_SPINUP_NX + i] + gamma_h;
-        e2r[i * WHEEL_SPINUP_NX + i] = e2r[i * WHEEL_SPINUP_NX + i] + alpha_h;
-        e2i[i * WHEEL_SPINUP_NX + i] = 3.0504301992474105 / h;
-    }
+    lu_shift(J, 3.637834252744496 / h, e1);
+    lu_shift_complex(J, 2.6810828736277523 / h, 3.0504301992474105 / h, e2r, e2i);
     if (lu_decompose(e1, piv1)) {
         return 1;
     }
@@ -7144,6 +8913,648 @@ static int radau5_grid(long ntimes, const double *times, double *x, const double
     }
 }
 
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+   Hairer's radau5.f strategy: the error test's tolerances are
+   rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
+   h_new/h = fac err^-1/4
+   within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+   Gustafsson's predictive controller after an accepted step.
+   J is kept while the Newton iterations contract by <= 0.001 a step, and
+   h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+   diverge, take more than 7, or meet a NaN or Inf
+   retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
+   times in a row at most.
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int radau5_events(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps,
+                         double (*out)[WHEEL_SPINUP_NX], long capacity, double *log_t,
+                         int *log_k, double (*log_x)[WHEEL_SPINUP_NX], long *nlog,
+                         wheel_spinup_stats *stats)
+{
+    double J[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double e1[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double e2r[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double e2i[WHEEL_SPINUP_NX * WHEEL_SPINUP_NX];
+    double z1[WHEEL_SPINUP_NX];
+    double z2[WHEEL_SPINUP_NX];
+    double z3[WHEEL_SPINUP_NX];
+    double w1[WHEEL_SPINUP_NX];
+    double w2[WHEEL_SPINUP_NX];
+    double w3[WHEEL_SPINUP_NX];
+    double ak1[WHEEL_SPINUP_NX];
+    double ak2[WHEEL_SPINUP_NX];
+    double ak3[WHEEL_SPINUP_NX];
+    double f0[WHEEL_SPINUP_NX];
+    double fnew[WHEEL_SPINUP_NX];
+    double scal[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
+    int piv1[WHEEL_SPINUP_NX];
+    int piv2[WHEEL_SPINUP_NX];
+    double t;
+    double h;
+    double h_old;
+    double h_new;
+    double h_acc;
+    double err_acc;
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    double err;
+    double quot;
+    double rate;
+    double theta;
+    double theta_old;
+    double dyno;
+    double dyno_old;
+    double thq;
+    double predicted;
+    double q;
+    double gus;
+    double c1q;
+    double c2q;
+    double c3q;
+    double theta_k;
+    int last;
+    int first;
+    int reject;
+    int fresh_jac;
+    int need_jac;
+    int need_lu;
+    int nonfinite;
+    int newt;
+    int outcome;
+    int singular;
+    int start;
+    double t0;
+    double t1;
+    long g;
+    double frac;
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_old[1];
+    double ev_new[1];
+    double ev_end[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_j;
+    int ev_need;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int ev_k;
+    int i;
+    int k;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return WHEEL_SPINUP_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    *nlog = 0;
+    start = ode_start(5, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0,
+            &h, stats);
+    if (start <= WHEEL_SPINUP_ODE_OK) {
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+        wheel_spinup_events(t0, x, c, ev_old);
+    }
+    if (start >= 0) {
+        return start;
+    }
+    t = t0;
+    h_old = 1.0;
+    rate = 1.0;
+    theta_old = 1.0;
+    dyno_old = 1.0;
+    h_acc = 0.0;
+    err_acc = 1e-2;
+    last = 0;
+    first = 1;
+    reject = 0;
+    fresh_jac = 0;
+    need_jac = 1;
+    need_lu = 1;
+    nonfinite = 0;
+    singular = 0;
+    #pragma GCC unroll 1
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+        ak1[i] = 0.0;
+        ak2[i] = 0.0;
+        ak3[i] = 0.0;
+    }
+    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
+    atol_e = rtol_e * (atol / rtol);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+    if (t + 1.01 * h >= t1) {
+        h = t1 - t;
+        last = 1;
+    }
+    #pragma GCC unroll 1
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                3.141592653589793 : fabs(x[i]));
+    }
+    for (;;) {
+        if (need_jac) {
+            wheel_spinup_jac(t, x, c, J);
+            stats->jac_calls = stats->jac_calls + 1;
+            if (!all_finite(J, WHEEL_SPINUP_NX * WHEEL_SPINUP_NX)) {
+                return WHEEL_SPINUP_ODE_ERR_NONFINITE;
+            }
+            fresh_jac = 1;
+            need_jac = 0;
+            need_lu = 1;
+        }
+        if (step_underflow(h, t)) {
+            return nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE : WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW;
+        }
+        if (stats->accepted + stats->rejected >= max_steps) {
+            return WHEEL_SPINUP_ODE_ERR_MAX_STEPS;
+        }
+        if (need_lu) {
+            stats->decompositions = stats->decompositions + 1;
+            if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) {
+                singular = singular + 1;
+                if (singular == 5) {
+                    return WHEEL_SPINUP_ODE_ERR_SINGULAR;
+                }
+                stats->rejected = stats->rejected + 1;
+                reject = 1;
+                last = 0;
+                h = h * 0.5;
+                need_jac = !fresh_jac;
+                continue;
+            }
+            singular = 0;
+            need_lu = 0;
+        }
+        stats->h = h;
+
+        /* the Newton iterations start from the last step's collocation polynomial */
+        if (first) {
+            #pragma GCC unroll 1
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                z1[i] = 0.0;
+                z2[i] = 0.0;
+                z3[i] = 0.0;
+                w1[i] = 0.0;
+                w2[i] = 0.0;
+                w3[i] = 0.0;
+            }
+        } else {
+            c3q = h / h_old;
+            c1q = 0.1550510257216822 * c3q;
+            c2q = 0.6449489742783178 * c3q;
+            #pragma GCC unroll 1
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                double a1, a2, a3;
+                a1 = c1q * (ak1[i] + (c1q + 0.35505102572168223) * (ak2[i] + (c1q +
+                        0.8449489742783178) * ak3[i]));
+                a2 = c2q * (ak1[i] + (c2q + 0.35505102572168223) * (ak2[i] + (c2q +
+                        0.8449489742783178) * ak3[i]));
+                a3 = c3q * (ak1[i] + (c3q + 0.35505102572168223) * (ak2[i] + (c3q +
+                        0.8449489742783178) * ak3[i]));
+                z1[i] = a1;
+                z2[i] = a2;
+                z3[i] = a3;
+                w1[i] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 + 0.5417705399358749 * a3;
+                w2[i] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 + 0.47662355450055044
+                        * a3;
+                w3[i] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 - 0.5960392048282249 * a3;
+            }
+        }
+
+        /* outcome: 0 converged, 1 too slowly (h reduced), 2 failed */
+        outcome = 0;
+        rate = pow(dmax(rate, 0.5 * DBL_EPSILON), 0.8);
+        theta = 1e-3;
+        newt = 0;
+        for (;;) {
+            if (newt >= 7) {
+                outcome = 2;
+                break;
+            }
+            dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2,
+                    w3);
+            stats->rhs_calls = stats->rhs_calls + 3;
+            newt = newt + 1;
+            if (!(fabs(dyno) <= DBL_MAX)) {
+                nonfinite = 1;
+                outcome = 2;
+                break;
+            }
+            if (newt > 1 && newt < 7) {
+                thq = dyno / dyno_old;
+                theta = newt == 2 ? thq : sqrt(thq * theta_old);
+                theta_old = thq;
+                if (!(theta < 0.99)) {
+                    outcome = 2;
+                    break;
+                }
+                rate = theta / (1.0 - theta);
+                theta_k = 1.0;
+                for (k = newt; k < 6; ++k) {
+                    theta_k = theta_k * theta;
+                }
+                predicted = rate * dyno * theta_k / newton_tol;
+                if (predicted >= 1.0) {
+                    q = dmax(1e-4, dmin(20.0, predicted));
+                    h = h * (0.8 * pow(q, -1.0 / (10 - newt)));
+                    outcome = 1;
+                    break;
+                }
+            }
+            dyno_old = dmax(dyno, 0.5 * DBL_EPSILON);
+            #pragma GCC unroll 1
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                double a1, a2, a3;
+                a1 = w1[i] + z1[i];
+                a2 = w2[i] + z2[i];
+                a3 = w3[i] + z3[i];
+                w1[i] = a1;
+                w2[i] = a2;
+                w3[i] = a3;
+                z1[i] = 0.09123239487089295 * a1 - 0.1412552950209542 * a2 - 0.030029194105147424
+                        * a3;
+                z2[i] = 0.241717932707107 * a1 + 0.20412935229379994 * a2 + 0.3829421127572619 * a3;
+                z3[i] = 0.966048182615093 * a1 + a2;
+            }
+            if (!(rate * dyno > newton_tol)) {
+                break;
+            }
+        }
+        if (outcome == 0) {
+            err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first || reject, stats);
+            #pragma GCC unroll 1
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                dx[i] = z3[i] - comp[i];
+                xnew[i] = x[i] + dx[i];
+            }
+            if (err < 1.0 && !last) {
+                wheel_spinup_rhs(t + h, xnew, c, fnew);  /* where the next step starts */
+                stats->rhs_calls = stats->rhs_calls + 1;
+                nonfinite = !all_finite(fnew, WHEEL_SPINUP_NX);
+            } else {
+                nonfinite = !(fabs(err) <= DBL_MAX);
+            }
+            nonfinite = nonfinite || !all_finite(xnew, WHEEL_SPINUP_NX);
+            if (nonfinite) {
+                outcome = 2;
+            }
+        }
+        if (outcome != 0) {
+            stats->rejected = stats->rejected + 1;
+            reject = 1;
+            last = 0;
+            if (outcome == 2) {
+                h = h * 0.5;
+            }
+            need_lu = 1;
+            need_jac = !fresh_jac;
+            continue;
+        }
+        quot = dmax(0.125, dmin(5.0, pow(err, 0.25) / dmin(0.9, 13.5 / (newt + 14))));  /* h_new = h / quot */
+        h_new = h / quot;
+        if (err < 1.0) {
+            if (gimbal_lock(x, xnew)) {
+                return WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR;  /* x: the state before this step */
+            }
+            first = 0;
+            if (stats->accepted > 0) {
+                gus = h_acc / h * pow(err * err / err_acc, 0.25) / 0.9;
+                quot = dmax(quot, dmax(0.125, dmin(5.0, gus)));
+                h_new = h / quot;
+            }
+            h_acc = h;
+            err_acc = dmax(1e-2, err);
+            h_old = h;
+            #pragma GCC unroll 1
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                double ak;
+                ak = (z2[i] - z1[i]) / 0.4898979485566356;
+                ak1[i] = (z3[i] - z2[i]) / 0.35505102572168223;
+                ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
+                ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
+            }
+            wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);
+            ev_need = g < ntimes && times[g] < (last ? t1 : t + h) ? 1 : 0;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
+                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                    ev_need = 1;
+                }
+            }
+            if (ev_need != 0) {
+            }
+            ev_stop = last ? t1 : t + h;
+            ev_halt = -1;
+            ev_ta = t;
+            ev_j = 0;
+            for (;;) {
+                if (ev_j >= 1) {
+                    break;
+                }
+                ev_j = ev_j + 1;
+                if (ev_j < 1) {
+                    ev_tb = t + ((last ? t1 : t + h) - t) * ((double)ev_j / 1.0);
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = xnew[i] + (ev_tb - (last ? t1 : t + h)) / h * (ak1[i] + ((ev_tb
+                                - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
+                                ((ev_tb - (last ? t1 : t + h)) / h + 0.8449489742783178) * ak3[i]));
+                    }
+                    wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_g[ev_k];
+                    }
+                } else {
+                    ev_tb = last ? t1 : t + h;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_end[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_t[ev_k] = DBL_MAX;
+                    if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_new[ev_k] >= 0.0) ||
+                            (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_new[ev_k] <= 0.0)) {
+                        ev_a = ev_ta;
+                        ev_b = ev_tb;
+                        ev_ga = ev_old[ev_k];
+                        ev_gb = ev_new[ev_k];
+                        ev_side = 0;
+                        ev_it = 0;
+                        for (;;) {
+                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                break;
+                            }
+                            ev_it = ev_it + 1;
+                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                break;
+                            }
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h * (ak1[i] +
+                                        ((ev_m - (last ? t1 : t + h)) / h + 0.35505102572168223)
+                                        * (ak2[i] + ((ev_m - (last ? t1 : t + h)) / h +
+                                        0.8449489742783178) * ak3[i]));
+                            }
+                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                            ev_gm = ev_g[ev_k];
+                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                    0.0))) {
+                                ev_a = ev_m;
+                                ev_ga = ev_gm;
+                                if (ev_side == -1) {
+                                    ev_gb = 0.5 * ev_gb;
+                                }
+                                ev_side = -1;
+                            } else {
+                                ev_b = ev_m;
+                                ev_gb = ev_gm;
+                                if (ev_side == 1) {
+                                    ev_ga = 0.5 * ev_ga;
+                                }
+                                ev_side = 1;
+                            }
+                        }
+                        ev_t[ev_k] = ev_b;
+                    } else {
+                        if ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <= DBL_MAX)) {
+                            ev_f = ev_ta;
+                            ev_gf = ev_old[ev_k];
+                            ev_b = ev_tb;
+                            ev_it = 0;
+                            for (;;) {
+                                if (ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
+                                            (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
+                                            0.35505102572168223) * (ak2[i] + ((ev_m - (last ? t1
+                                            : t + h)) / h + 0.8449489742783178) * ak3[i]));
+                                }
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                    ev_f = ev_m;
+                                    ev_gf = ev_g[ev_k];
+                                } else {
+                                    ev_b = ev_m;
+                                }
+                            }
+                            if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_gf >= 0.0) ||
+                                    (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_gf <= 0.0)) {
+                                ev_a = ev_ta;
+                                ev_b = ev_f;
+                                ev_ga = ev_old[ev_k];
+                                ev_gb = ev_gf;
+                                ev_side = 0;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
+                                                (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
+                                                0.35505102572168223) * (ak2[i] + ((ev_m - (last ?
+                                                t1 : t + h)) / h + 0.8449489742783178) * ak3[i]));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    ev_gm = ev_g[ev_k];
+                                    if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                            !(ev_ga > 0.0))) {
+                                        ev_a = ev_m;
+                                        ev_ga = ev_gm;
+                                        if (ev_side == -1) {
+                                            ev_gb = 0.5 * ev_gb;
+                                        }
+                                        ev_side = -1;
+                                    } else {
+                                        ev_b = ev_m;
+                                        ev_gb = ev_gm;
+                                        if (ev_side == 1) {
+                                            ev_ga = 0.5 * ev_ga;
+                                        }
+                                        ev_side = 1;
+                                    }
+                                }
+                                ev_t[ev_k] = ev_b;
+                            }
+                        }
+                    }
+                }
+                for (;;) {
+                    ev_best = -1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] < ev_t[ev_best])) {
+                            ev_best = ev_k;
+                        }
+                    }
+                    if (ev_best < 0) {
+                        break;
+                    }
+                    if (*nlog >= capacity) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                        break;
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = xnew[i] + (ev_t[ev_best] - (last ? t1 : t + h)) / h * (ak1[i] +
+                                ((ev_t[ev_best] - (last ? t1 : t + h)) / h + 0.35505102572168223)
+                                * (ak2[i] + ((ev_t[ev_best] - (last ? t1 : t + h)) / h +
+                                0.8449489742783178) * ak3[i]));
+                    }
+                    log_t[*nlog] = ev_t[ev_best];
+                    log_k[*nlog] = ev_best;
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        log_x[*nlog][i] = ev_y[i];
+                    }
+                    *nlog = *nlog + 1;
+                    if (ev_term[ev_best] != 0) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                        break;
+                    }
+                    ev_t[ev_best] = DBL_MAX;
+                }
+                if (ev_halt >= 0) {
+                    break;
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_old[ev_k] = ev_new[ev_k];
+                }
+                ev_ta = ev_tb;
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < ev_stop)) {
+                    break;
+                }
+                frac = (times[g] - (last ? t1 : t + h)) / h;
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    out[g][i] = xnew[i] + frac * (ak1[i] + (frac + 0.35505102572168223) * (ak2[i]
+                            + (frac + 0.8449489742783178) * ak3[i]));
+                }
+                g = g + 1;
+            }
+            if (ev_halt >= 0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = xnew[i] + (ev_stop - (last ? t1 : t + h)) / h * (ak1[i] + ((ev_stop
+                            - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
+                            ((ev_stop - (last ? t1 : t + h)) / h + 0.8449489742783178) * ak3[i]));
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    x[i] = ev_y[i];
+                }
+                t = ev_stop;
+                stats->t = t;
+                stats->accepted = stats->accepted + 1;
+                if (g < ntimes) {
+                    if (times[g] <= t) {
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            out[g][i] = x[i];
+                        }
+                        g = g + 1;
+                    }
+                }
+                return ev_halt;
+            }
+            accept_step(x, xnew, dx, comp);
+            t = last ? t1 : t + h;
+            stats->t = t;
+            stats->accepted = stats->accepted + 1;
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+            if (last) {
+                return WHEEL_SPINUP_ODE_OK;
+            }
+            #pragma GCC unroll 1
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                f0[i] = fnew[i];
+                scal[i] = atol_e + rtol_e * (is_angle[i] * fabs(x[i]) > 3.141592653589793 ?
+                        3.141592653589793 : fabs(x[i]));
+            }
+            fresh_jac = 0;
+            h_new = dmin(h_new, t1 - t0);
+            if (reject) {
+                h_new = dmin(h_new, h);
+            }
+            reject = 0;
+            if (t + 1.01 * h_new >= t1) {
+                h = t1 - t;
+                last = 1;
+            } else {
+                if (theta <= 1e-3 && h_new >= 1.0 * h && h_new <= 1.2 * h) {
+                    continue;
+                } else {
+                    h = h_new;
+                }
+            }
+            need_lu = 1;
+            need_jac = theta > 1e-3;
+        } else {
+            stats->rejected = stats->rejected + 1;
+            reject = 1;
+            last = 0;
+            h = first ? h * 0.1 : h_new;
+            need_lu = 1;
+            need_jac = !fresh_jac;
+        }
+    }
+}
+
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. */
 int wheel_spinup_radau5(double t0, double t1, double *x, const double *c, double rtol,
                         double atol, double h0, long max_steps, wheel_spinup_stats *stats)
@@ -7160,6 +9571,47 @@ int wheel_spinup_radau5_grid(long ntimes, const double *times, double *x, const 
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
+}
+
+/* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive. Over an output grid, with the scene's events located (see wheel_spinup_ode.h). */
+int wheel_spinup_radau5_events(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               long capacity, double *log_t, int *log_k, double *log_x,
+                               long *nlog, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return radau5_events(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+            (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Each state its _events call, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+size_t wheel_spinup_radau5_events_batch(size_t n, long ntimes, const double *times, double *x,
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, long capacity,
+                                        double *log_t, int *log_k, double *log_x, long *nlog,
+                                        wheel_spinup_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const size_t room = capacity > 0 ? (size_t)capacity : 0;
+        const int code = wheel_spinup_radau5_events(ntimes, times,
+                x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * WHEEL_SPINUP_NX, capacity, log_t + (size_t)i * room,
+                log_k + (size_t)i * room, log_x + (size_t)i * room * WHEEL_SPINUP_NX, nlog + i,
+                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. Every core under OpenMP. */
@@ -8163,6 +10615,813 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
     }
 }
 
+/* Taylor series (Jorba & Zou, Experiment. Math. 14 (2005); the order and step
+   size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
+   every state by the automatic-differentiation recurrences over the scene's
+   own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
+   last two coefficients of each group of states, each by its own scale,
+   the new state by Horner's scheme.
+   The output grid: one integration from times[0] to times[ntimes - 1], the
+   steps
+   not cut at the grid times; out[g] is the state at times[g], from the
+   accepted
+   step's interpolant, or its end state where a step ends on times[g] (the last
+   one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+   time reached unwritten; a bad grid (ERR_GRID) writes none. */
+static int taylor_events(long ntimes, const double *times, double *x, const double *c,
+                         double rtol, double atol, double h0, long max_steps,
+                         double (*out)[WHEEL_SPINUP_NX], long capacity, double *log_t,
+                         int *log_k, double (*log_x)[WHEEL_SPINUP_NX], long *nlog,
+                         wheel_spinup_stats *stats)
+{
+    double tay[21][21];
+    static const double inv[21] = {0.0, 1.0, 0.5, 0.3333333333333333, 0.25, 0.2,
+            0.16666666666666666, 0.14285714285714285, 0.125, 0.1111111111111111, 0.1,
+            0.09090909090909091, 0.08333333333333333, 0.07692307692307693, 0.07142857142857142,
+            0.06666666666666667, 0.0625, 0.058823529411764705, 0.05555555555555555,
+            0.05263157894736842, 0.05};
+    static const double rhofacs[21] = {0.0, 0.0, 0.06720551273974977, 0.09536916221554963,
+            0.10717059875230675, 0.11360815367076375, 0.11765484302177921, 0.12043240152376272,
+            0.12245642825298193, 0.12399674050160123, 0.12520814359063986, 0.12618578170503877,
+            0.12699134256376904, 0.12766657029576653, 0.12824072030490302, 0.12873490358780423,
+            0.1291647359223283, 0.12954201633524534, 0.12987582587444038, 0.13017326751821864,
+            0.130439976885755};
+    double f0[WHEEL_SPINUP_NX];
+    double xnew[WHEEL_SPINUP_NX];
+    double dx[WHEEL_SPINUP_NX];
+    double comp[WHEEL_SPINUP_NX];
+    int order;
+    double rhofac;
+    double scale;
+    int code;
+    double t;
+    double h;
+    double cap;
+    int nonfinite;
+    int last;
+    int run;
+    int take;
+    int ok;
+    int at;
+    int jump;
+    int retry;
+    double xmax;
+    double dp;
+    double dq;
+    double rp;
+    double rq;
+    double rho;
+    double h2;
+    double acc8;
+    double acc9;
+    double acc10;
+    double acc11;
+    double acc13;
+    double acc14;
+    double acc15;
+    double acc16;
+    double acc17;
+    double acc19;
+    double acc27;
+    double acc33;
+    double acc39;
+    double acc46;
+    double acc52;
+    double acc58;
+    double ib15;
+    double ub15;
+    double v10;
+    double v11;
+    double v12;
+    double v16;
+    double v17;
+    double v18;
+    double v19;
+    double v20;
+    double v21;
+    double v23;
+    double v25;
+    double v27;
+    double v29;
+    double v31;
+    double v33;
+    double v34;
+    double v39;
+    double v40;
+    double v41;
+    double v42;
+    double v44;
+    double v46;
+    double v47;
+    double v48;
+    double v50;
+    double v52;
+    double v54;
+    double v55;
+    double v56;
+    double v58;
+    double v59;
+    double acc[WHEEL_SPINUP_NX];
+    double t0;
+    double t1;
+    long g;
+    double told;
+    double frac;
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_old[1];
+    double ev_new[1];
+    double ev_end[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_j;
+    int ev_need;
+    int ev_k;
+    int i;
+    int j;
+    int n;
+    int q;
+
+    if (!grid_ok(ntimes, times)) {
+        stats_start(stats, (double)NAN);
+        return WHEEL_SPINUP_ODE_ERR_GRID;
+    }
+    t0 = times[0];
+    t1 = times[ntimes - 1];
+    g = 0;
+    *nlog = 0;
+    code = ode_start(0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL, t0, t1, x, c, rtol, atol, h0,
+            max_steps, f0, &h, stats);
+    if (code <= WHEEL_SPINUP_ODE_OK) {
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            out[0][i] = x[i];
+        }
+        g = 1;
+        wheel_spinup_events(t0, x, c, ev_old);
+    }
+    if (code >= 0) {
+        return code;
+    }
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
+    rhofac = rhofacs[order];
+    scale = atol / rtol;
+    code = -1;
+    t = t0;
+    nonfinite = 0;
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        comp[i] = 0.0;
+    }
+    cap = h0 > 0.0 ? h : DBL_MAX;
+    for (;;) {
+
+        /* the coefficients at x, and the step they allow (Jorba and Zou) */
+        run = code < 0;
+        /* orders 0 and 1 of the state and of every node */
+        tay[0][0] = x[0];
+        tay[0][1] = x[1];
+        tay[0][2] = x[2];
+        tay[0][3] = x[3];
+        tay[0][4] = x[4];
+        tay[0][5] = x[5];
+        tay[0][6] = x[6];
+        tay[0][7] = x[7];
+        tay[0][8] = wheel_spinup_sin(tay[0][2]);
+        tay[0][9] = wheel_spinup_cos(tay[0][2]);
+        v10 = tay[0][9] * tay[0][6];
+        v11 = tay[0][8] * tay[0][4];
+        v12 = v10 - v11;
+        tay[0][10] = wheel_spinup_sin(tay[0][1]);
+        tay[0][11] = wheel_spinup_cos(tay[0][1]);
+        tay[0][12] = v12 / tay[0][11];
+        v16 = tay[0][8] * tay[0][6];
+        v17 = tay[0][9] * tay[0][4];
+        v18 = v16 + v17;
+        v19 = tay[0][12] * tay[0][10];
+        v20 = tay[0][5] - v19;
+        v21 = tay[0][7] - tay[0][5];
+        v23 = 0.3499793829482495 * tay[0][6];
+        v25 = 0.014646230145692387 * tay[0][4];
+        tay[0][13] = v23 - v25;
+        v27 = tay[0][5] * tay[0][13];
+        v29 = 1.6873537034207817e-05 * tay[0][4];
+        v31 = 0.0007488716786310489 * tay[0][6];
+        tay[0][14] = v29 + v31;
+        v33 = tay[0][7] * tay[0][14];
+        v34 = v27 + v33;
+        tay[0][15] = 1.0 * c[0];
+        v39 = tay[0][6] * tay[0][6];
+        v40 = 0.01627906976744186 * v39;
+        v41 = tay[0][15] - v40;
+        v42 = 0.01627906976744186 * tay[0][4];
+        v44 = 0.06976744186046512 * tay[0][6];
+        tay[0][16] = v42 - v44;
+        v46 = tay[0][4] * tay[0][16];
+        v47 = v41 + v46;
+        v48 = 0.014646230145692387 * tay[0][6];
+        v50 = 0.2872098251809964 * tay[0][4];
+        tay[0][17] = v48 - v50;
+        v52 = tay[0][5] * tay[0][17];
+        v54 = 0.0008211868373490824 * tay[0][4];
+        v55 = -v54;
+        v56 = 1.6873537034207817e-05 * tay[0][6];
+        tay[0][18] = v55 - v56;
+        v58 = tay[0][7] * tay[0][18];
+        v59 = v52 + v58;
+        ib15 = 1.0 / tay[0][11];
+        ub15 = tay[0][12] / tay[0][11];
+        tay[1][0] = tay[0][12];
+        tay[1][1] = v18;
+        tay[1][19] = tay[1][1];
+        tay[1][2] = v20;
+        tay[1][20] = tay[1][2];
+        tay[1][3] = v21;
+        tay[1][4] = v34;
+        tay[1][5] = v47;
+        tay[1][6] = v59;
+        tay[1][7] = c[1];
+        tay[1][8] = tay[1][2] * tay[0][9];
+        tay[1][9] = -(tay[1][2] * tay[0][8]);
+        v10 = tay[0][9] * tay[1][6] + tay[1][9] * tay[0][6];
+        v11 = tay[0][8] * tay[1][4] + tay[1][8] * tay[0][4];
+        v12 = v10 - v11;
+        tay[1][10] = tay[1][1] * tay[0][11];
+        tay[1][11] = -(tay[1][1] * tay[0][10]);
+        tay[1][12] = v12 * ib15 - tay[1][11] * ub15;
+        v16 = tay[0][8] * tay[1][6] + tay[1][8] * tay[0][6];
+        v17 = tay[0][9] * tay[1][4] + tay[1][9] * tay[0][4];
+        v18 = v16 + v17;
+        v19 = tay[0][12] * tay[1][10] + tay[1][12] * tay[0][10];
+        v20 = tay[1][5] - v19;
+        v21 = tay[1][7] - tay[1][5];
+        v23 = 0.3499793829482495 * tay[1][6];
+        v25 = 0.014646230145692387 * tay[1][4];
+        tay[1][13] = v23 - v25;
+        v27 = tay[0][5] * tay[1][13] + tay[1][5] * tay[0][13];
+        v29 = 1.6873537034207817e-05 * tay[1][4];
+        v31 = 0.0007488716786310489 * tay[1][6];
+        tay[1][14] = v29 + v31;
+        v33 = tay[0][7] * tay[1][14] + tay[1][7] * tay[0][14];
+        v34 = v27 + v33;
+        v39 = tay[0][6] * tay[1][6] + tay[1][6] * tay[0][6];
+        v40 = 0.01627906976744186 * v39;
+        v41 = -v40;
+        v42 = 0.01627906976744186 * tay[1][4];
+        v44 = 0.06976744186046512 * tay[1][6];
+        tay[1][16] = v42 - v44;
+        v46 = tay[0][4] * tay[1][16] + tay[1][4] * tay[0][16];
+        v47 = v41 + v46;
+        v48 = 0.014646230145692387 * tay[1][6];
+        v50 = 0.2872098251809964 * tay[1][4];
+        tay[1][17] = v48 - v50;
+        v52 = tay[0][5] * tay[1][17] + tay[1][5] * tay[0][17];
+        v54 = 0.0008211868373490824 * tay[1][4];
+        v55 = -v54;
+        v56 = 1.6873537034207817e-05 * tay[1][6];
+        tay[1][18] = v55 - v56;
+        v58 = tay[0][7] * tay[1][18] + tay[1][7] * tay[0][18];
+        v59 = v52 + v58;
+        tay[2][0] = tay[1][12] * inv[2];
+        tay[2][1] = v18 * inv[2];
+        tay[2][19] = v18;
+        tay[2][2] = v20 * inv[2];
+        tay[2][20] = v20;
+        tay[2][3] = v21 * inv[2];
+        tay[2][4] = v34 * inv[2];
+        tay[2][5] = v47 * inv[2];
+        tay[2][6] = v59 * inv[2];
+        tay[2][7] = 0.0;
+
+        /* orders 2 .. order-1 of the nodes, so orders 3 .. order of the state */
+        for (n = 2; n < order; ++n) {
+            acc33 = tay[1][7] * tay[n - 1][14];
+            acc58 = tay[1][7] * tay[n - 1][18];
+            acc8 = 0.0;
+            acc9 = 0.0;
+            acc10 = 0.0;
+            acc11 = 0.0;
+            acc13 = 0.0;
+            acc14 = 0.0;
+            acc15 = 0.0;
+            acc16 = 0.0;
+            acc17 = 0.0;
+            acc19 = 0.0;
+            acc27 = 0.0;
+            acc39 = 0.0;
+            acc46 = 0.0;
+            acc52 = 0.0;
+            for (j = 1; j < n; ++j) {
+                acc8 = acc8 + tay[j][20] * tay[n - j][9];
+                acc9 = acc9 + tay[j][20] * tay[n - j][8];
+                acc10 = acc10 + tay[j][9] * tay[n - j][6];
+                acc11 = acc11 + tay[j][8] * tay[n - j][4];
+                acc13 = acc13 + tay[j][19] * tay[n - j][11];
+                acc14 = acc14 + tay[j][19] * tay[n - j][10];
+                acc15 = acc15 + tay[j][11] * tay[n - j][12];
+                acc16 = acc16 + tay[j][8] * tay[n - j][6];
+                acc17 = acc17 + tay[j][9] * tay[n - j][4];
+                acc19 = acc19 + tay[j][12] * tay[n - j][10];
+                acc27 = acc27 + tay[j][5] * tay[n - j][13];
+                acc39 = acc39 + tay[j][6] * tay[n - j][6];
+                acc46 = acc46 + tay[j][4] * tay[n - j][16];
+                acc52 = acc52 + tay[j][5] * tay[n - j][17];
+            }
+            tay[n][8] = acc8 * inv[n] + tay[n][2] * tay[0][9];
+            tay[n][9] = -(acc9 * inv[n]) - tay[n][2] * tay[0][8];
+            v10 = acc10 + tay[0][9] * tay[n][6] + tay[n][9] * tay[0][6];
+            v11 = acc11 + tay[0][8] * tay[n][4] + tay[n][8] * tay[0][4];
+            v12 = v10 - v11;
+            tay[n][10] = acc13 * inv[n] + tay[n][1] * tay[0][11];
+            tay[n][11] = -(acc14 * inv[n]) - tay[n][1] * tay[0][10];
+            tay[n][12] = v12 * ib15 - (acc15 * ib15 + tay[n][11] * ub15);
+            v16 = acc16 + tay[0][8] * tay[n][6] + tay[n][8] * tay[0][6];
+            v17 = acc17 + tay[0][9] * tay[n][4] + tay[n][9] * tay[0][4];
+            v18 = v16 + v17;
+            v19 = acc19 + tay[0][12] * tay[n][10] + tay[n][12] * tay[0][10];
+            v20 = tay[n][5] - v19;
+            v21 = -tay[n][5];
+            v23 = 0.3499793829482495 * tay[n][6];
+            v25 = 0.014646230145692387 * tay[n][4];
+            tay[n][13] = v23 - v25;
+            v27 = acc27 + tay[0][5] * tay[n][13] + tay[n][5] * tay[0][13];
+            v29 = 1.6873537034207817e-05 * tay[n][4];
+            v31 = 0.0007488716786310489 * tay[n][6];
+            tay[n][14] = v29 + v31;
+            v33 = acc33 + tay[0][7] * tay[n][14];
+            v34 = v27 + v33;
+            v39 = acc39 + tay[0][6] * tay[n][6] + tay[n][6] * tay[0][6];
+            v40 = 0.01627906976744186 * v39;
+            v41 = -v40;
+            v42 = 0.01627906976744186 * tay[n][4];
+            v44 = 0.06976744186046512 * tay[n][6];
+            tay[n][16] = v42 - v44;
+            v46 = acc46 + tay[0][4] * tay[n][16] + tay[n][4] * tay[0][16];
+            v47 = v41 + v46;
+            v48 = 0.014646230145692387 * tay[n][6];
+            v50 = 0.2872098251809964 * tay[n][4];
+            tay[n][17] = v48 - v50;
+            v52 = acc52 + tay[0][5] * tay[n][17] + tay[n][5] * tay[0][17];
+            v54 = 0.0008211868373490824 * tay[n][4];
+            v55 = -v54;
+            v56 = 1.6873537034207817e-05 * tay[n][6];
+            tay[n][18] = v55 - v56;
+            v58 = acc58 + tay[0][7] * tay[n][18];
+            v59 = v52 + v58;
+            tay[n + 1][0] = tay[n][12] * inv[n + 1];
+            tay[n + 1][1] = v18 * inv[n + 1];
+            tay[n + 1][19] = v18;
+            tay[n + 1][2] = v20 * inv[n + 1];
+            tay[n + 1][20] = v20;
+            tay[n + 1][3] = v21 * inv[n + 1];
+            tay[n + 1][4] = v34 * inv[n + 1];
+            tay[n + 1][5] = v47 * inv[n + 1];
+            tay[n + 1][6] = v59 * inv[n + 1];
+        }
+        stats->rhs_calls = stats->rhs_calls + (run ? 1 : 0);
+        rp = DBL_MAX;
+        rq = DBL_MAX;
+
+        /* the bound the attitude set */
+        xmax = 0.0;
+        for (i = 0; i < 3; ++i) {
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
+        }
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 0; i < 3; ++i) {
+            dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
+            dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
+        }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rp = xmax / dp < rp ? xmax / dp : rp;
+        rq = xmax / dq < rq ? xmax / dq : rq;
+
+        /* the bound the rotor angles set */
+        xmax = 0.0;
+        for (i = 3; i < 4; ++i) {
+            xmax = (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) > xmax ?
+                    (fabs(x[i]) > 3.141592653589793 ? 3.141592653589793 : fabs(x[i])) : xmax;
+        }
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 3; i < 4; ++i) {
+            dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
+            dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
+        }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rp = xmax / dp < rp ? xmax / dp : rp;
+        rq = xmax / dq < rq ? xmax / dq : rq;
+
+        /* the bound the carrier rates set */
+        xmax = 0.0;
+        for (i = 4; i < 7; ++i) {
+            xmax = fabs(x[i]) > xmax ? fabs(x[i]) : xmax;
+        }
+        dp = 0.0;
+        dq = 0.0;
+        for (i = 4; i < 7; ++i) {
+            dp = fabs(tay[order][i]) > dp ? fabs(tay[order][i]) : dp;
+            dq = fabs(tay[order - 1][i]) > dq ? fabs(tay[order - 1][i]) : dq;
+        }
+        xmax = dmax(scale, xmax);  /* the absolute and relative modes in one */
+        rp = xmax / dp < rp ? xmax / dp : rp;
+        rq = xmax / dq < rq ? xmax / dq : rq;
+        rho = step_exp2(dmin(step_log2(rp) * inv[order], step_log2(rq) * inv[order - 1]));
+        h = dmin(dmin(rho * rhofac, t1 - t), cap);
+        last = t + 1.01 * h >= t1;
+        h = last ? t1 - t : h;
+        told = t;
+        stats->h = run ? h : stats->h;
+        code = run ? (step_underflow(h,
+                t) ? (nonfinite ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW) : stats->accepted + stats->rejected >=
+                max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) : code;  /* lost in t, or no steps left */
+        run = code < 0;
+
+        /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
+        h2 = h * h;
+        for (i = 0; i < 7; ++i) {
+            xnew[i] = tay[order][i];
+        }
+        for (q = 0; q < (order - 1) / 2; ++q) {
+            for (i = 0; i < 7; ++i) {
+                xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+            }
+        }
+        for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
+            for (i = 0; i < 7; ++i) {
+                xnew[i] = tay[1][i] + h * xnew[i];
+            }
+        }
+        xnew[7] = tay[1][7];
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            dx[i] = h * xnew[i] - comp[i];
+            xnew[i] = x[i] + dx[i];
+        }
+        nonfinite = 0;
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            nonfinite = nonfinite || !(fabs(xnew[i]) <= DBL_MAX);
+        }
+
+        /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+        take = run && !nonfinite;
+        at = xnew[1] * 0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) < 1e-6 || xnew[1] *
+                0.3183098861837907 + 0.5 - gimbal_interval(xnew[1]) > 0.999999 || !(fabs(xnew[1])
+                < 1000000.0) ? fabs(wheel_spinup_cos(xnew[1])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS
+                : 0;
+        jump = fabs(gimbal_interval(x[1]) - gimbal_interval(xnew[1])) >= 1.0;
+        ok = take && !at && !jump;
+        retry = run && (nonfinite || jump);  /* past gimbal lock, or not finite */
+        code = take && at && !jump ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR : ok && last ?
+                WHEEL_SPINUP_ODE_OK : code;
+        t = ok ? (last ? t1 : t + h) : t;
+        stats->t = t;
+        stats->accepted = stats->accepted + (ok ? 1 : 0);
+        stats->rejected = stats->rejected + (retry ? 1 : 0);
+        cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
+        if (ok) {
+            wheel_spinup_events(t, xnew, c, ev_end);
+            ev_need = g < ntimes && times[g] < t ? 1 : 0;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
+                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                    ev_need = 1;
+                }
+            }
+            if (ev_need != 0) {
+            }
+            ev_stop = t;
+            ev_halt = -1;
+            ev_ta = told;
+            ev_j = 0;
+            for (;;) {
+                if (ev_j >= 1) {
+                    break;
+                }
+                ev_j = ev_j + 1;
+                if (ev_j < 1) {
+                    ev_tb = told + (t - told) * ((double)ev_j / 1.0);
+                    for (i = 0; i < 7; ++i) {
+                        acc[i] = tay[order][i];
+                    }
+                    for (q = 0; q < order - 1; ++q) {
+                        for (i = 0; i < 7; ++i) {
+                            acc[i] = tay[order - 1 - q][i] + (ev_tb - told) * acc[i];
+                        }
+                    }
+                    for (i = 0; i < 7; ++i) {
+                        ev_y[i] = x[i] + (ev_tb - told) * acc[i];
+                    }
+                    ev_y[7] = x[7] + (ev_tb - told) * tay[1][7];
+                    wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_g[ev_k];
+                    }
+                } else {
+                    ev_tb = t;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_new[ev_k] = ev_end[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_t[ev_k] = DBL_MAX;
+                    if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_new[ev_k] >= 0.0) ||
+                            (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_new[ev_k] <= 0.0)) {
+                        ev_a = ev_ta;
+                        ev_b = ev_tb;
+                        ev_ga = ev_old[ev_k];
+                        ev_gb = ev_new[ev_k];
+                        ev_side = 0;
+                        ev_it = 0;
+                        for (;;) {
+                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                break;
+                            }
+                            ev_it = ev_it + 1;
+                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                break;
+                            }
+                            for (i = 0; i < 7; ++i) {
+                                acc[i] = tay[order][i];
+                            }
+                            for (q = 0; q < order - 1; ++q) {
+                                for (i = 0; i < 7; ++i) {
+                                    acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
+                                }
+                            }
+                            for (i = 0; i < 7; ++i) {
+                                ev_y[i] = x[i] + (ev_m - told) * acc[i];
+                            }
+                            ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
+                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                            ev_gm = ev_g[ev_k];
+                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                    0.0))) {
+                                ev_a = ev_m;
+                                ev_ga = ev_gm;
+                                if (ev_side == -1) {
+                                    ev_gb = 0.5 * ev_gb;
+                                }
+                                ev_side = -1;
+                            } else {
+                                ev_b = ev_m;
+                                ev_gb = ev_gm;
+                                if (ev_side == 1) {
+                                    ev_ga = 0.5 * ev_ga;
+                                }
+                                ev_side = 1;
+                            }
+                        }
+                        ev_t[ev_k] = ev_b;
+                    } else {
+                        if ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <= DBL_MAX)) {
+                            ev_f = ev_ta;
+                            ev_gf = ev_old[ev_k];
+                            ev_b = ev_tb;
+                            ev_it = 0;
+                            for (;;) {
+                                if (ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 0; i < 7; ++i) {
+                                    acc[i] = tay[order][i];
+                                }
+                                for (q = 0; q < order - 1; ++q) {
+                                    for (i = 0; i < 7; ++i) {
+                                        acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
+                                    }
+                                }
+                                for (i = 0; i < 7; ++i) {
+                                    ev_y[i] = x[i] + (ev_m - told) * acc[i];
+                                }
+                                ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                    ev_f = ev_m;
+                                    ev_gf = ev_g[ev_k];
+                                } else {
+                                    ev_b = ev_m;
+                                }
+                            }
+                            if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_gf >= 0.0) ||
+                                    (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_gf <= 0.0)) {
+                                ev_a = ev_ta;
+                                ev_b = ev_f;
+                                ev_ga = ev_old[ev_k];
+                                ev_gb = ev_gf;
+                                ev_side = 0;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < 7; ++i) {
+                                        acc[i] = tay[order][i];
+                                    }
+                                    for (q = 0; q < order - 1; ++q) {
+                                        for (i = 0; i < 7; ++i) {
+                                            acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
+                                        }
+                                    }
+                                    for (i = 0; i < 7; ++i) {
+                                        ev_y[i] = x[i] + (ev_m - told) * acc[i];
+                                    }
+                                    ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    ev_gm = ev_g[ev_k];
+                                    if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                            !(ev_ga > 0.0))) {
+                                        ev_a = ev_m;
+                                        ev_ga = ev_gm;
+                                        if (ev_side == -1) {
+                                            ev_gb = 0.5 * ev_gb;
+                                        }
+                                        ev_side = -1;
+                                    } else {
+                                        ev_b = ev_m;
+                                        ev_gb = ev_gm;
+                                        if (ev_side == 1) {
+                                            ev_ga = 0.5 * ev_ga;
+                                        }
+                                        ev_side = 1;
+                                    }
+                                }
+                                ev_t[ev_k] = ev_b;
+                            }
+                        }
+                    }
+                }
+                for (;;) {
+                    ev_best = -1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] < ev_t[ev_best])) {
+                            ev_best = ev_k;
+                        }
+                    }
+                    if (ev_best < 0) {
+                        break;
+                    }
+                    if (*nlog >= capacity) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                        break;
+                    }
+                    for (i = 0; i < 7; ++i) {
+                        acc[i] = tay[order][i];
+                    }
+                    for (q = 0; q < order - 1; ++q) {
+                        for (i = 0; i < 7; ++i) {
+                            acc[i] = tay[order - 1 - q][i] + (ev_t[ev_best] - told) * acc[i];
+                        }
+                    }
+                    for (i = 0; i < 7; ++i) {
+                        ev_y[i] = x[i] + (ev_t[ev_best] - told) * acc[i];
+                    }
+                    ev_y[7] = x[7] + (ev_t[ev_best] - told) * tay[1][7];
+                    log_t[*nlog] = ev_t[ev_best];
+                    log_k[*nlog] = ev_best;
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        log_x[*nlog][i] = ev_y[i];
+                    }
+                    *nlog = *nlog + 1;
+                    if (ev_term[ev_best] != 0) {
+                        ev_stop = ev_t[ev_best];
+                        ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                        break;
+                    }
+                    ev_t[ev_best] = DBL_MAX;
+                }
+                if (ev_halt >= 0) {
+                    break;
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_old[ev_k] = ev_new[ev_k];
+                }
+                ev_ta = ev_tb;
+            }
+            for (;;) {
+                if (!(g < ntimes)) {
+                    break;
+                }
+                if (!(times[g] < ev_stop)) {
+                    break;
+                }
+                frac = times[g] - told;
+                for (i = 0; i < 7; ++i) {
+                    acc[i] = tay[order][i];
+                }
+                for (q = 0; q < order - 1; ++q) {
+                    for (i = 0; i < 7; ++i) {
+                        acc[i] = tay[order - 1 - q][i] + frac * acc[i];
+                    }
+                }
+                for (i = 0; i < 7; ++i) {
+                    out[g][i] = x[i] + frac * acc[i];
+                }
+                out[g][7] = x[7] + frac * tay[1][7];
+                g = g + 1;
+            }
+            if (ev_halt >= 0) {
+                for (i = 0; i < 7; ++i) {
+                    acc[i] = tay[order][i];
+                }
+                for (q = 0; q < order - 1; ++q) {
+                    for (i = 0; i < 7; ++i) {
+                        acc[i] = tay[order - 1 - q][i] + (ev_stop - told) * acc[i];
+                    }
+                }
+                for (i = 0; i < 7; ++i) {
+                    ev_y[i] = x[i] + (ev_stop - told) * acc[i];
+                }
+                ev_y[7] = x[7] + (ev_stop - told) * tay[1][7];
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    x[i] = ev_y[i];
+                }
+                t = ev_stop;
+                stats->t = t;
+                if (g < ntimes) {
+                    if (times[g] <= t) {
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            out[g][i] = x[i];
+                        }
+                        g = g + 1;
+                    }
+                }
+                return ev_halt;
+            }
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                comp[i] = xnew[i] - x[i] - dx[i];
+                x[i] = xnew[i];
+            }
+            if (g < ntimes) {
+                if (times[g] <= t) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        out[g][i] = x[i];
+                    }
+                    g = g + 1;
+                }
+            }
+        }
+        if (code >= 0) {
+            return code;
+        }
+    }
+}
+
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. */
 int wheel_spinup_taylor(double t0, double t1, double *x, const double *c, double rtol,
                         double atol, double h0, long max_steps, wheel_spinup_stats *stats)
@@ -8179,6 +11438,47 @@ int wheel_spinup_taylor_grid(long ntimes, const double *times, double *x, const 
     wheel_spinup_stats own;  /* when stats is NULL: not wanted */
     return taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps,
             (double (*)[WHEEL_SPINUP_NX])out, stats ? stats : &own);
+}
+
+/* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes. Over an output grid, with the scene's events located (see wheel_spinup_ode.h). */
+int wheel_spinup_taylor_events(long ntimes, const double *times, double *x, const double *c,
+                               double rtol, double atol, double h0, long max_steps, double *out,
+                               long capacity, double *log_t, int *log_k, double *log_x,
+                               long *nlog, wheel_spinup_stats *stats)
+{
+    wheel_spinup_stats own;  /* when stats is NULL: not wanted */
+    return taylor_events(ntimes, times, x, c, rtol, atol, h0, max_steps,
+            (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+            (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
+}
+
+/* NULL stats or codes: not wanted. Each state its _events call, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+size_t wheel_spinup_taylor_events_batch(size_t n, long ntimes, const double *times, double *x,
+                                        const double *c, double rtol, double atol, double h0,
+                                        long max_steps, double *out, long capacity,
+                                        double *log_t, int *log_k, double *log_x, long *nlog,
+                                        wheel_spinup_stats *stats, int *codes)
+{
+    size_t failed = 0;
+    long i;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
+#endif
+    for (i = 0; i < (long)n; ++i) {
+        const size_t rows = ntimes > 0 ? (size_t)ntimes : 0;
+        const size_t room = capacity > 0 ? (size_t)capacity : 0;
+        const int code = wheel_spinup_taylor_events(ntimes, times,
+                x + (size_t)i * WHEEL_SPINUP_NX, c, rtol, atol, h0, max_steps,
+                out + (size_t)i * rows * WHEEL_SPINUP_NX, capacity, log_t + (size_t)i * room,
+                log_k + (size_t)i * room, log_x + (size_t)i * room * WHEEL_SPINUP_NX, nlog + i,
+                stats ? stats + i : NULL);
+        if (codes) {
+            codes[i] = code;
+        }
+        failed += (size_t)(code != WHEEL_SPINUP_ODE_OK);
+    }
+    return failed;
 }
 
 /* NULL stats or codes: not wanted. WHEEL_SPINUP_LANES trajectories at once, in SIMD lanes

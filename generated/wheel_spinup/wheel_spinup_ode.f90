@@ -4,7 +4,7 @@
 ! template fortran/ode.f90.jinja. Do not edit: change the template or the
 ! generator and run `gyrogen generate` (or `make generate`).
 !
-! Build id 12205a99de73d91a. The same interface as wheel_spinup_ode.h, under
+! Build id f74296a5d112754d. The same interface as wheel_spinup_ode.h, under
 ! the bind(C) names wheel_spinup_f_<method> and wheel_spinup_f_<method>_batch.
 ! Coefficients and their published sources as above each method in wheel_spinup_ode.c.
 ! wheel_spinup_f.h declares these bind(C) procedures for C callers.
@@ -30,6 +30,7 @@ module wheel_spinup_ode_mod
                          nc => WHEEL_SPINUP_NC
   use wheel_spinup_mod, only: wheel_spinup_sin
   use wheel_spinup_mod, only: wheel_spinup_cos
+  use wheel_spinup_mod, only: wheel_spinup_events
   implicit none
   private
   public :: wheel_spinup_jac
@@ -40,10 +41,15 @@ module wheel_spinup_ode_mod
   public :: wheel_spinup_radau5, wheel_spinup_radau5_batch
   public :: wheel_spinup_taylor, wheel_spinup_taylor_batch
   public :: wheel_spinup_dopri5_grid, wheel_spinup_dopri5_grid_batch
+  public :: wheel_spinup_dopri5_events, wheel_spinup_dopri5_events_batch
   public :: wheel_spinup_dop853_grid, wheel_spinup_dop853_grid_batch
+  public :: wheel_spinup_dop853_events, wheel_spinup_dop853_events_batch
   public :: wheel_spinup_rodas4_grid, wheel_spinup_rodas4_grid_batch
+  public :: wheel_spinup_rodas4_events, wheel_spinup_rodas4_events_batch
   public :: wheel_spinup_radau5_grid, wheel_spinup_radau5_grid_batch
+  public :: wheel_spinup_radau5_events, wheel_spinup_radau5_events_batch
   public :: wheel_spinup_taylor_grid, wheel_spinup_taylor_grid_batch
+  public :: wheel_spinup_taylor_events, wheel_spinup_taylor_events_batch
   public :: wheel_spinup_ode_strerror
 
   ! What an integration did, and where it stopped:
@@ -566,6 +572,120 @@ contains
     return
   end function grid_ok
 
+  ! a := d I - J at the entries lu_decompose and lu_solve read; J is zero
+  ! at the others, which they never touch.
+  subroutine lu_shift(J, d, a)
+    real(c_double), intent(in) :: d
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: a(0:nx * nx - 1)
+
+    a(0) = d - J(0)
+    a(1) = -J(1)
+    a(2) = -J(2)
+    a(4) = -J(4)
+    a(6) = -J(6)
+    a(9) = d - J(9)
+    a(10) = -J(10)
+    a(12) = -J(12)
+    a(13) = -J(13)
+    a(14) = -J(14)
+    a(17) = -J(17)
+    a(18) = d - J(18)
+    a(20) = -J(20)
+    a(21) = -J(21)
+    a(22) = -J(22)
+    a(27) = d - J(27)
+    a(29) = -J(29)
+    a(31) = -J(31)
+    a(36) = d - J(36)
+    a(37) = -J(37)
+    a(38) = -J(38)
+    a(39) = -J(39)
+    a(44) = -J(44)
+    a(45) = d - J(45)
+    a(46) = -J(46)
+    a(47) = -J(47)
+    a(52) = -J(52)
+    a(53) = -J(53)
+    a(54) = d - J(54)
+    a(55) = -J(55)
+    a(63) = d - J(63)
+  end subroutine lu_shift
+
+  ! lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is
+  ! left as it is where the matrix is real, -J, for lu_solve_complex (a row's
+  ! reads of the state, in an augmented system).
+  subroutine lu_shift_complex(J, dr, di, ar, ai)
+    real(c_double), intent(in) :: dr
+    real(c_double), intent(in) :: di
+    real(c_double), intent(in) :: J(0:nx * nx - 1)
+    real(c_double), intent(out) :: ar(0:nx * nx - 1)
+    real(c_double), intent(out) :: ai(0:nx * nx - 1)
+
+    ar(0) = dr - J(0)
+    ai(0) = di
+    ar(1) = -J(1)
+    ai(1) = 0.0_c_double
+    ar(2) = -J(2)
+    ai(2) = 0.0_c_double
+    ar(4) = -J(4)
+    ai(4) = 0.0_c_double
+    ar(6) = -J(6)
+    ai(6) = 0.0_c_double
+    ar(9) = dr - J(9)
+    ai(9) = di
+    ar(10) = -J(10)
+    ai(10) = 0.0_c_double
+    ar(12) = -J(12)
+    ai(12) = 0.0_c_double
+    ar(13) = -J(13)
+    ai(13) = 0.0_c_double
+    ar(14) = -J(14)
+    ai(14) = 0.0_c_double
+    ar(17) = -J(17)
+    ai(17) = 0.0_c_double
+    ar(18) = dr - J(18)
+    ai(18) = di
+    ar(20) = -J(20)
+    ai(20) = 0.0_c_double
+    ar(21) = -J(21)
+    ai(21) = 0.0_c_double
+    ar(22) = -J(22)
+    ai(22) = 0.0_c_double
+    ar(27) = dr - J(27)
+    ai(27) = di
+    ar(29) = -J(29)
+    ai(29) = 0.0_c_double
+    ar(31) = -J(31)
+    ai(31) = 0.0_c_double
+    ar(36) = dr - J(36)
+    ai(36) = di
+    ar(37) = -J(37)
+    ai(37) = 0.0_c_double
+    ar(38) = -J(38)
+    ai(38) = 0.0_c_double
+    ar(39) = -J(39)
+    ai(39) = 0.0_c_double
+    ar(44) = -J(44)
+    ai(44) = 0.0_c_double
+    ar(45) = dr - J(45)
+    ai(45) = di
+    ar(46) = -J(46)
+    ai(46) = 0.0_c_double
+    ar(47) = -J(47)
+    ai(47) = 0.0_c_double
+    ar(52) = -J(52)
+    ai(52) = 0.0_c_double
+    ar(53) = -J(53)
+    ai(53) = 0.0_c_double
+    ar(54) = dr - J(54)
+    ai(54) = di
+    ar(55) = -J(55)
+    ai(55) = 0.0_c_double
+    ar(63) = dr - J(63)
+    ai(63) = di
+  end subroutine lu_shift_complex
+
   ! In-place LU decomposition with partial pivoting within the diagonal
   ! blocks (0, 1), (1, 3), (3, 4), (4, 7), (7, 8), unrolled over the entries
   ! of U that can be nonzero: L unit lower; U = D V as 1/u_kk and u_kj/u_kk;
@@ -602,11 +722,20 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = a(1 * nx + j)
         a(1 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(12)
+      a(12) = a(p * nx + 4)
+      a(p * nx + 4) = swap
+      swap = a(13)
+      a(13) = a(p * nx + 5)
+      a(p * nx + 5) = swap
+      swap = a(14)
+      a(14) = a(p * nx + 6)
+      a(p * nx + 6) = swap
     end if
     a(9) = 1.0_c_double / a(9)
     do i = 2, 3 - 1
@@ -650,11 +779,14 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 4, nx - 1
+      do j = 4, 7 - 1
         swap = a(4 * nx + j)
         a(4 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(39)
+      a(39) = a(p * nx + 7)
+      a(p * nx + 7) = swap
     end if
     a(36) = 1.0_c_double / a(36)
     do i = 5, 7 - 1
@@ -679,11 +811,14 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 4, nx - 1
+      do j = 4, 7 - 1
         swap = a(5 * nx + j)
         a(5 * nx + j) = a(p * nx + j)
         a(p * nx + j) = swap
       end do
+      swap = a(47)
+      a(47) = a(p * nx + 7)
+      a(p * nx + 7) = swap
     end if
     a(45) = 1.0_c_double / a(45)
     do i = 6, 7 - 1
@@ -815,7 +950,7 @@ contains
       return
     end if
     if (p /= 1) then
-      do j = 1, nx - 1
+      do j = 1, 3 - 1
         swap = ar(1 * nx + j)
         ar(1 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -823,6 +958,24 @@ contains
         ai(1 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(12)
+      ar(12) = ar(p * nx + 4)
+      ar(p * nx + 4) = swap
+      swap = ai(12)
+      ai(12) = ai(p * nx + 4)
+      ai(p * nx + 4) = swap
+      swap = ar(13)
+      ar(13) = ar(p * nx + 5)
+      ar(p * nx + 5) = swap
+      swap = ai(13)
+      ai(13) = ai(p * nx + 5)
+      ai(p * nx + 5) = swap
+      swap = ar(14)
+      ar(14) = ar(p * nx + 6)
+      ar(p * nx + 6) = swap
+      swap = ai(14)
+      ai(14) = ai(p * nx + 6)
+      ai(p * nx + 6) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(9)
@@ -947,7 +1100,7 @@ contains
       return
     end if
     if (p /= 4) then
-      do j = 4, nx - 1
+      do j = 4, 7 - 1
         swap = ar(4 * nx + j)
         ar(4 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -955,6 +1108,12 @@ contains
         ai(4 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(39)
+      ar(39) = ar(p * nx + 7)
+      ar(p * nx + 7) = swap
+      swap = ai(39)
+      ai(39) = ai(p * nx + 7)
+      ai(p * nx + 7) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(36)
@@ -1013,7 +1172,7 @@ contains
       return
     end if
     if (p /= 5) then
-      do j = 4, nx - 1
+      do j = 4, 7 - 1
         swap = ar(5 * nx + j)
         ar(5 * nx + j) = ar(p * nx + j)
         ar(p * nx + j) = swap
@@ -1021,6 +1180,12 @@ contains
         ai(5 * nx + j) = ai(p * nx + j)
         ai(p * nx + j) = swap
       end do
+      swap = ar(47)
+      ar(47) = ar(p * nx + 7)
+      ar(p * nx + 7) = swap
+      swap = ai(47)
+      ai(47) = ai(p * nx + 7)
+      ai(p * nx + 7) = swap
     end if
     ! 1/u_kk by Smith's division (no overflow in re^2 + im^2)
     re = ar(45)
@@ -1705,6 +1870,515 @@ contains
     end do
   end function dopri5_grid
 
+  ! dopri5 to t1, with Hairer's step-size strategy: the last step clipped
+  ! to end on t1, no growth right after a rejection, and a non-finite trial
+  ! rejected with h shrunk by facmin.
+  ! Hairer's DOPRI5 defaults: beta = 0.04, alpha = 1/5 - 0.75 beta.
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function dopri5_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+          log_k, log_x, nlog, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    integer(c_long), intent(in) :: capacity
+    integer(c_long), intent(out) :: nlog
+    type(wheel_spinup_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    real(c_double), intent(out) :: log_t(0:capacity - 1)
+    integer(c_int), intent(out) :: log_k(0:capacity - 1)
+    real(c_double), intent(out) :: log_x(0:nx - 1, 0:capacity - 1)
+    integer(c_int) :: res
+    real(c_double) :: k(0:nx - 1, 0:12)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err_old
+    logical :: nonfinite
+    logical :: rejected_last
+    logical :: last
+    real(c_double) :: err
+    logical :: run
+    logical :: take
+    logical :: lock
+    logical :: ok
+    real(c_double) :: fac
+    real(c_double) :: grow
+    real(c_double) :: total
+    real(c_double) :: dense(0:nx - 1, 0:3)
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: told
+    real(c_double) :: hs
+    real(c_double) :: frac
+    integer(c_int), parameter :: ev_dir(0:0) = [1]
+    integer(c_int), parameter :: ev_term(0:0) = [0]
+    real(c_double) :: ev_old(0:0)
+    real(c_double) :: ev_new(0:0)
+    real(c_double) :: ev_end(0:0)
+    real(c_double) :: ev_g(0:0)
+    real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_y(0:nx - 1)
+    real(c_double) :: ev_a
+    real(c_double) :: ev_b
+    real(c_double) :: ev_ga
+    real(c_double) :: ev_gb
+    real(c_double) :: ev_m
+    real(c_double) :: ev_gm
+    real(c_double) :: ev_f
+    real(c_double) :: ev_gf
+    real(c_double) :: ev_stop
+    real(c_double) :: ev_ta
+    real(c_double) :: ev_tb
+    integer(c_int) :: ev_side
+    integer(c_int) :: ev_best
+    integer(c_int) :: ev_halt
+    integer(c_int) :: ev_it
+    integer(c_int) :: ev_j
+    integer(c_int) :: ev_need
+    real(c_double), parameter :: is_angle(0:7) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        1.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
+    real(c_double) :: e
+    integer(c_int) :: ev_k
+    integer(c_int) :: i
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = WHEEL_SPINUP_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    nlog = 0
+    code = ode_start(5, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
+    if (code <= WHEEL_SPINUP_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+      call wheel_spinup_events(t0, x, c, ev_old)
+    end if
+    if (code >= 0) then
+      res = code
+      return
+    end if
+    code = -1
+    t = t0
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
+    do
+
+      ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
+      code = merge(merge(merge(WHEEL_SPINUP_ODE_ERR_NONFINITE, &
+          WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW, nonfinite), merge(WHEEL_SPINUP_ODE_ERR_MAX_STEPS, &
+          -1, stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, code < 0)
+      last = t + 1.01_c_double * h >= t1
+      h = merge(t1 - t, h, code < 0 .and. last)
+      stats%h = merge(h, stats%h, code < 0)
+      told = t
+      hs = h
+      if (code >= 0) then
+        res = code
+        return
+      end if
+
+      ! trial
+
+      ! stage 2: t + 0.2 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.2_c_double * k(i, 0))
+      end do
+      call wheel_spinup_rhs(t + 0.2_c_double * h, y, c, k(:, 1))
+
+      ! stage 3: t + 0.3 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.075_c_double * k(i, 0) + 0.225_c_double * k(i, 1))
+      end do
+      call wheel_spinup_rhs(t + 0.3_c_double * h, y, c, k(:, 2))
+
+      ! stage 4: t + 0.8 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((0.9777777777777777_c_double * k(i, &
+            0) - 3.7333333333333334_c_double * k(i, 1)) + 3.5555555555555554_c_double * k(i, 2))
+      end do
+      call wheel_spinup_rhs(t + 0.8_c_double * h, y, c, k(:, 3))
+
+      ! stage 5: t + 0.8888888888888888 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (((2.9525986892242035_c_double * k(i, &
+            0) - 11.595793324188385_c_double * k(i, 1)) + 9.822892851699436_c_double * k(i, &
+            2)) - 0.2908093278463649_c_double * k(i, 3))
+      end do
+      call wheel_spinup_rhs(t + 0.8888888888888888_c_double * h, y, c, k(:, 4))
+
+      ! stage 6: t + h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((2.8462752525252526_c_double * k(i, &
+            0) - 10.757575757575758_c_double * k(i, 1)) + 8.906422717743473_c_double * k(i, &
+            2)) + 0.2784090909090909_c_double * k(i, 3)) - 0.2735313036020583_c_double * k(i, 4))
+      end do
+      call wheel_spinup_rhs(t + h, y, c, k(:, 5))
+
+      ! stage 7: t + h, the new solution
+      do i = 0, nx - 1
+        dx(i) = h * ((((0.09114583333333333_c_double * k(i, &
+            0) + 0.44923629829290207_c_double * k(i, 2)) + 0.6510416666666666_c_double * k(i, &
+            3)) - 0.322376179245283_c_double * k(i, 4)) + 0.13095238095238096_c_double * k(i, &
+            5)) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+      call wheel_spinup_rhs(t + h, xnew, c, k(:, 6))
+
+      ! the error norm (see error_norm)
+      total = 0.0_c_double
+      do i = 0, nx - 1
+        e = (h * (((((0.0012326388888888888_c_double * k(i, &
+            0) - 0.0042527702905061394_c_double * k(i, 2)) + 0.03697916666666667_c_double * k(i, &
+            3)) - 0.05086379716981132_c_double * k(i, 4)) + 0.0419047619047619_c_double * k(i, &
+            5)) - 0.025_c_double * k(i, 6))) / (atol + rtol * (merge(3.141592653589793_c_double, &
+            merge(abs(xnew(i)), abs(x(i)), abs(xnew(i)) > abs(x(i))), &
+            is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
+        total = total + e * e
+      end do
+      err = sqrt(total / nx)
+
+      ! check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken
+      stats%rhs_calls = stats%rhs_calls + (merge(6, 0, code < 0))
+      nonfinite = .not. ieee_is_finite(err)
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+
+      ! control: accept or reject by selection, and the next h
+      run = code < 0
+      take = run .and. .not. nonfinite .and. err <= 1.0_c_double
+      lock = (merge(abs(wheel_spinup_cos(xnew(1))) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS, .false., &
+          (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+          1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+          gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+          1000000.0_c_double))) .or. abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= &
+          1.0_c_double
+      ok = take .and. .not. lock
+      fac = err**0.17_c_double / 0.9_c_double  ! h / h_new, in Hairer's form
+      grow = max(0.1_c_double, min(5.0_c_double, fac / err_old**0.04_c_double))
+      grow = merge(max(grow, 1.0_c_double), grow, rejected_last)  ! no growth after a rejection
+      code = merge(WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR, merge(WHEEL_SPINUP_ODE_OK, code, &
+          ok .and. last), take .and. lock)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, run .and. .not. take))
+      err_old = merge(max(err, 1e-4_c_double), err_old, ok)
+      rejected_last = merge(.false., merge(.true., rejected_last, run .and. .not. take), ok)
+      h = merge(h, merge(h * 0.2_c_double, merge(h / grow, h / min(5.0_c_double, fac), ok), &
+          nonfinite), .not. run .or. (take .and. lock))
+
+      ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
+      if (ok) then
+        call wheel_spinup_events(t, xnew, c, ev_end)
+        ev_need = merge(1, 0, g < ntimes .and. times(g) < t)
+        do ev_k = 0, 1 - 1
+          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
+              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k)))) then
+            ev_need = 1
+          end if
+        end do
+        if (ev_need /= 0) then
+
+          ! the dense output of order 4
+          do i = 0, nx - 1
+            dense(i, 0) = xnew(i) - x(i)
+            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+            dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
+            dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
+                0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
+                3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
+                5)) + 2.382468931778144_c_double * k(i, 6))
+          end do
+        end if
+        ev_stop = t
+        ev_halt = -1
+        ev_ta = told
+        ev_j = 0
+        do
+          if (ev_j >= 1) then
+            exit
+          end if
+          ev_j = ev_j + 1
+          if (ev_j < 1) then
+            ev_tb = told + (t - told) * (real(ev_j, c_double) / 1.0_c_double)
+            do i = 0, nx - 1
+              ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
+                  0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
+                  1) + ((ev_tb - told) / hs) * (dense(i, &
+                  2) + (1.0_c_double - (ev_tb - told) / hs) * dense(i, 3))))
+            end do
+            call wheel_spinup_events(ev_tb, ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_g(ev_k)
+            end do
+          else
+            ev_tb = t
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_end(ev_k)
+            end do
+          end if
+          do ev_k = 0, 1 - 1
+            ev_t(ev_k) = huge(1.0_c_double)
+            if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) >= &
+                0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                ev_new(ev_k) <= 0.0_c_double)) then
+              ev_a = ev_ta
+              ev_b = ev_tb
+              ev_ga = ev_old(ev_k)
+              ev_gb = ev_new(ev_k)
+              ev_side = 0
+              ev_it = 0
+              do
+                if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                  exit
+                end if
+                ev_it = ev_it + 1
+                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  exit
+                end if
+                do i = 0, nx - 1
+                  ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                      0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                      1) + ((ev_m - told) / hs) * (dense(i, &
+                      2) + (1.0_c_double - (ev_m - told) / hs) * dense(i, 3))))
+                end do
+                call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                ev_gm = ev_g(ev_k)
+                if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                    0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                  ev_a = ev_m
+                  ev_ga = ev_gm
+                  if (ev_side == -1) then
+                    ev_gb = 0.5_c_double * ev_gb
+                  end if
+                  ev_side = -1
+                else
+                  ev_b = ev_m
+                  ev_gb = ev_gm
+                  if (ev_side == 1) then
+                    ev_ga = 0.5_c_double * ev_ga
+                  end if
+                  ev_side = 1
+                end if
+              end do
+              ev_t(ev_k) = ev_b
+            else
+              if (ieee_is_finite(ev_old(ev_k)) .and. .not. ieee_is_finite(ev_new(ev_k))) then
+                ev_f = ev_ta
+                ev_gf = ev_old(ev_k)
+                ev_b = ev_tb
+                ev_it = 0
+                do
+                  if (ev_it >= 200) then
+                    exit
+                  end if
+                  ev_it = ev_it + 1
+                  ev_m = ev_f + 0.5_c_double * (ev_b - ev_f)
+                  if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
+                    exit
+                  end if
+                  do i = 0, nx - 1
+                    ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                        0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                        1) + ((ev_m - told) / hs) * (dense(i, &
+                        2) + (1.0_c_double - (ev_m - told) / hs) * dense(i, 3))))
+                  end do
+                  call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                  if (ieee_is_finite(ev_g(ev_k))) then
+                    ev_f = ev_m
+                    ev_gf = ev_g(ev_k)
+                  else
+                    ev_b = ev_m
+                  end if
+                end do
+                if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_gf >= &
+                    0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                    ev_gf <= 0.0_c_double)) then
+                  ev_a = ev_ta
+                  ev_b = ev_f
+                  ev_ga = ev_old(ev_k)
+                  ev_gb = ev_gf
+                  ev_side = 0
+                  ev_it = 0
+                  do
+                    if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                          0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          1) + ((ev_m - told) / hs) * (dense(i, &
+                          2) + (1.0_c_double - (ev_m - told) / hs) * dense(i, 3))))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    ev_gm = ev_g(ev_k)
+                    if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                        0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                      ev_a = ev_m
+                      ev_ga = ev_gm
+                      if (ev_side == -1) then
+                        ev_gb = 0.5_c_double * ev_gb
+                      end if
+                      ev_side = -1
+                    else
+                      ev_b = ev_m
+                      ev_gb = ev_gm
+                      if (ev_side == 1) then
+                        ev_ga = 0.5_c_double * ev_ga
+                      end if
+                      ev_side = 1
+                    end if
+                  end do
+                  ev_t(ev_k) = ev_b
+                end if
+              end if
+            end if
+          end do
+          do
+            ev_best = -1
+            do ev_k = 0, 1 - 1
+              if (ev_t(ev_k) < huge(1.0_c_double) .and. (ev_best < 0 .or. ev_t(ev_k) < &
+                  ev_t(ev_best))) then
+                ev_best = ev_k
+              end if
+            end do
+            if (ev_best < 0) then
+              exit
+            end if
+            if (nlog >= capacity) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL
+              exit
+            end if
+            do i = 0, nx - 1
+              ev_y(i) = x(i) + ((ev_t(ev_best) - told) / hs) * (dense(i, &
+                  0) + (1.0_c_double - (ev_t(ev_best) - told) / hs) * (dense(i, &
+                  1) + ((ev_t(ev_best) - told) / hs) * (dense(i, &
+                  2) + (1.0_c_double - (ev_t(ev_best) - told) / hs) * dense(i, 3))))
+            end do
+            log_t(nlog) = ev_t(ev_best)
+            log_k(nlog) = ev_best
+            do i = 0, nx - 1
+              log_x(i, nlog) = ev_y(i)
+            end do
+            nlog = nlog + 1
+            if (ev_term(ev_best) /= 0) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_EVENT
+              exit
+            end if
+            ev_t(ev_best) = huge(1.0_c_double)
+          end do
+          if (ev_halt >= 0) then
+            exit
+          end if
+          do ev_k = 0, 1 - 1
+            ev_old(ev_k) = ev_new(ev_k)
+          end do
+          ev_ta = ev_tb
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < ev_stop)) then
+            exit
+          end if
+          frac = (times(g) - told) / hs
+          do i = 0, nx - 1
+            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+                1) + frac * (dense(i, 2) + (1.0_c_double - frac) * dense(i, 3))))
+          end do
+          g = g + 1
+        end do
+        if (ev_halt >= 0) then
+          do i = 0, nx - 1
+            ev_y(i) = x(i) + ((ev_stop - told) / hs) * (dense(i, &
+                0) + (1.0_c_double - (ev_stop - told) / hs) * (dense(i, &
+                1) + ((ev_stop - told) / hs) * (dense(i, &
+                2) + (1.0_c_double - (ev_stop - told) / hs) * dense(i, 3))))
+          end do
+          do i = 0, nx - 1
+            x(i) = ev_y(i)
+          end do
+          t = ev_stop
+          stats%t = t
+          if (g < ntimes) then
+            if (times(g) <= t) then
+              do i = 0, nx - 1
+                out(i, g) = x(i)
+              end do
+              g = g + 1
+            end if
+          end if
+          res = ev_halt
+          return
+        end if
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
+        do i = 0, nx - 1
+          k(i, 0) = k(i, 6)
+        end do
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+      end if
+      if (code >= 0) then
+        res = code
+        return
+      end if
+    end do
+  end function dopri5_events
+
   ! Dormand-Prince 5(4), adaptive, PI step-size control.
   function wheel_spinup_dopri5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dopri5")
@@ -1743,6 +2417,32 @@ contains
     code = dopri5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
   end function wheel_spinup_dopri5_grid
 
+  ! Dormand-Prince 5(4), adaptive, PI step-size control.
+  ! Over an output grid, with the scene's events located (see wheel_spinup_ode.h).
+  function wheel_spinup_dopri5_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      capacity, log_t, log_k, log_x, nlog, stats_ptr) result(code) &
+      bind(C, name="wheel_spinup_f_dopri5_events")
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long))
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long))
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long))
+    integer(c_long), intent(out) :: nlog
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
+    integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = dopri5_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+        log_k, log_x, nlog, stats)
+  end function wheel_spinup_dopri5_events
+
   ! stats, codes: NULL when not wanted.
   function wheel_spinup_dopri5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
       stats, codes) result(failed) &
@@ -1780,6 +2480,49 @@ contains
     end do
     !$omp end parallel do
   end function wheel_spinup_dopri5_grid_batch
+
+  ! stats, codes: NULL when not wanted.
+  function wheel_spinup_dopri5_events_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, capacity, log_t, log_k, log_x, nlog, stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_dopri5_events_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long), n)
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long), n)
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long), n)
+    integer(c_long), intent(inout) :: nlog(n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(wheel_spinup_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = wheel_spinup_dopri5_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), &
+            c_loc(stats_out(i)))
+      else
+        code = wheel_spinup_dopri5_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function wheel_spinup_dopri5_events_batch
 
   ! dop853 to t1, with Hairer's step-size strategy: the last step clipped
   ! to end on t1, no growth right after a rejection, and a non-finite trial
@@ -2406,6 +3149,667 @@ contains
     end do
   end function dop853_grid
 
+  ! dop853 to t1, with Hairer's step-size strategy: the last step clipped
+  ! to end on t1, no growth right after a rejection, and a non-finite trial
+  ! rejected with h shrunk by facmin.
+  ! Hairer's DOP853 defaults: beta = 0 (alpha = 1/8), h_new/h in [0.333, 6].
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function dop853_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+          log_k, log_x, nlog, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    integer(c_long), intent(in) :: capacity
+    integer(c_long), intent(out) :: nlog
+    type(wheel_spinup_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    real(c_double), intent(out) :: log_t(0:capacity - 1)
+    integer(c_int), intent(out) :: log_k(0:capacity - 1)
+    real(c_double), intent(out) :: log_x(0:nx - 1, 0:capacity - 1)
+    integer(c_int) :: res
+    real(c_double) :: k(0:nx - 1, 0:15)
+    real(c_double) :: y(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err_old
+    logical :: nonfinite
+    logical :: rejected_last
+    logical :: last
+    real(c_double) :: err
+    logical :: run
+    logical :: take
+    logical :: lock
+    logical :: ok
+    real(c_double) :: fac
+    real(c_double) :: grow
+    real(c_double) :: err5
+    real(c_double) :: err3
+    real(c_double) :: deno
+    real(c_double) :: dense(0:nx - 1, 0:6)
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: told
+    real(c_double) :: hs
+    real(c_double) :: frac
+    integer(c_int), parameter :: ev_dir(0:0) = [1]
+    integer(c_int), parameter :: ev_term(0:0) = [0]
+    real(c_double) :: ev_old(0:0)
+    real(c_double) :: ev_new(0:0)
+    real(c_double) :: ev_end(0:0)
+    real(c_double) :: ev_g(0:0)
+    real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_y(0:nx - 1)
+    real(c_double) :: ev_a
+    real(c_double) :: ev_b
+    real(c_double) :: ev_ga
+    real(c_double) :: ev_gb
+    real(c_double) :: ev_m
+    real(c_double) :: ev_gm
+    real(c_double) :: ev_f
+    real(c_double) :: ev_gf
+    real(c_double) :: ev_stop
+    real(c_double) :: ev_ta
+    real(c_double) :: ev_tb
+    integer(c_int) :: ev_side
+    integer(c_int) :: ev_best
+    integer(c_int) :: ev_halt
+    integer(c_int) :: ev_it
+    integer(c_int) :: ev_j
+    integer(c_int) :: ev_need
+    real(c_double), parameter :: is_angle(0:7) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        1.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
+    real(c_double) :: e3
+    real(c_double) :: e5
+    integer(c_int) :: ev_k
+    integer(c_int) :: i
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = WHEEL_SPINUP_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    nlog = 0
+    code = ode_start(8, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, k(:, &
+        0), h, stats)
+    if (code <= WHEEL_SPINUP_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+      call wheel_spinup_events(t0, x, c, ev_old)
+    end if
+    if (code >= 0) then
+      res = code
+      return
+    end if
+    code = -1
+    t = t0
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    err_old = 1e-4_c_double
+    rejected_last = .false.
+    do
+
+      ! begin: a step size lost in t, or no steps left, stops; a last step ends on t1
+      code = merge(merge(merge(WHEEL_SPINUP_ODE_ERR_NONFINITE, &
+          WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW, nonfinite), merge(WHEEL_SPINUP_ODE_ERR_MAX_STEPS, &
+          -1, stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, code < 0)
+      last = t + 1.01_c_double * h >= t1
+      h = merge(t1 - t, h, code < 0 .and. last)
+      stats%h = merge(h, stats%h, code < 0)
+      told = t
+      hs = h
+      if (code >= 0) then
+        res = code
+        return
+      end if
+
+      ! trial
+
+      ! stage 2: t + 0.05260015195876773 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.05260015195876773_c_double * k(i, 0))
+      end do
+      call wheel_spinup_rhs(t + 0.05260015195876773_c_double * h, y, c, k(:, 1))
+
+      ! stage 3: t + 0.0789002279381516 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.0197250569845379_c_double * k(i, &
+            0) + 0.0591751709536137_c_double * k(i, 1))
+      end do
+      call wheel_spinup_rhs(t + 0.0789002279381516_c_double * h, y, c, k(:, 2))
+
+      ! stage 4: t + 0.1183503419072274 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (0.02958758547680685_c_double * k(i, &
+            0) + 0.08876275643042054_c_double * k(i, 2))
+      end do
+      call wheel_spinup_rhs(t + 0.1183503419072274_c_double * h, y, c, k(:, 3))
+
+      ! stage 5: t + 0.2816496580927726 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((0.2413651341592667_c_double * k(i, &
+            0) - 0.8845494793282861_c_double * k(i, 2)) + 0.924834003261792_c_double * k(i, 3))
+      end do
+      call wheel_spinup_rhs(t + 0.2816496580927726_c_double * h, y, c, k(:, 4))
+
+      ! stage 6: t + 0.3333333333333333 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((0.037037037037037035_c_double * k(i, &
+            0) + 0.17082860872947386_c_double * k(i, 3)) + 0.12546768756682242_c_double * k(i, 4))
+      end do
+      call wheel_spinup_rhs(t + 0.3333333333333333_c_double * h, y, c, k(:, 5))
+
+      ! stage 7: t + 0.25 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (((0.037109375_c_double * k(i, 0) + 0.17025221101954405_c_double * k(i, &
+            3)) + 0.06021653898045596_c_double * k(i, 4)) - 0.017578125_c_double * k(i, 5))
+      end do
+      call wheel_spinup_rhs(t + 0.25_c_double * h, y, c, k(:, 6))
+
+      ! stage 8: t + 0.3076923076923077 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((0.03709200011850479_c_double * k(i, &
+            0) + 0.17038392571223998_c_double * k(i, 3)) + 0.10726203044637328_c_double * k(i, &
+            4)) - 0.015319437748624402_c_double * k(i, 5)) + 0.008273789163814023_c_double * k(i, &
+            6))
+      end do
+      call wheel_spinup_rhs(t + 0.3076923076923077_c_double * h, y, c, k(:, 7))
+
+      ! stage 9: t + 0.6512820512820513 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * (((((0.6241109587160757_c_double * k(i, &
+            0) - 3.3608926294469414_c_double * k(i, 3)) - 0.868219346841726_c_double * k(i, &
+            4)) + 27.59209969944671_c_double * k(i, 5)) + 20.154067550477894_c_double * k(i, &
+            6)) - 43.48988418106996_c_double * k(i, 7))
+      end do
+      call wheel_spinup_rhs(t + 0.6512820512820513_c_double * h, y, c, k(:, 8))
+
+      ! stage 10: t + 0.6 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((((0.47766253643826434_c_double * k(i, &
+            0) - 2.4881146199716677_c_double * k(i, 3)) - 0.590290826836843_c_double * k(i, &
+            4)) + 21.230051448181193_c_double * k(i, 5)) + 15.279233632882423_c_double * k(i, &
+            6)) - 33.28821096898486_c_double * k(i, 7)) - 0.020331201708508627_c_double * k(i, 8))
+      end do
+      call wheel_spinup_rhs(t + 0.6_c_double * h, y, c, k(:, 9))
+
+      ! stage 11: t + 0.8571428571428571 h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((((((-0.9371424300859873_c_double) * k(i, &
+            0) + 5.186372428844064_c_double * k(i, 3)) + 1.0914373489967295_c_double * k(i, &
+            4)) - 8.149787010746927_c_double * k(i, 5)) - 18.52006565999696_c_double * k(i, &
+            6)) + 22.739487099350505_c_double * k(i, 7)) + 2.4936055526796523_c_double * k(i, &
+            8)) - 3.0467644718982196_c_double * k(i, 9))
+      end do
+      call wheel_spinup_rhs(t + 0.8571428571428571_c_double * h, y, c, k(:, 10))
+
+      ! stage 12: t + h
+      do i = 0, nx - 1
+        y(i) = x(i) + h * ((((((((2.273310147516538_c_double * k(i, &
+            0) - 10.53449546673725_c_double * k(i, 3)) - 2.0008720582248625_c_double * k(i, &
+            4)) - 17.9589318631188_c_double * k(i, 5)) + 27.94888452941996_c_double * k(i, &
+            6)) - 2.8589982771350235_c_double * k(i, 7)) - 8.87285693353063_c_double * k(i, &
+            8)) + 12.360567175794303_c_double * k(i, 9)) + 0.6433927460157636_c_double * k(i, 10))
+      end do
+      call wheel_spinup_rhs(t + h, y, c, k(:, 11))
+
+      ! the new solution
+      do i = 0, nx - 1
+        dx(i) = h * (((((((0.054293734116568765_c_double * k(i, &
+            0) + 4.450312892752409_c_double * k(i, 5)) + 1.8915178993145003_c_double * k(i, &
+            6)) - 5.801203960010585_c_double * k(i, 7)) + 0.3111643669578199_c_double * k(i, &
+            8)) - 0.1521609496625161_c_double * k(i, 9)) + 0.20136540080403034_c_double * k(i, &
+            10)) + 0.04471061572777259_c_double * k(i, 11)) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+
+      ! the error: DOP853's two estimates, combined
+      err5 = 0.0_c_double
+      err3 = 0.0_c_double
+      do i = 0, nx - 1
+        e5 = (((((((0.01312004499419488_c_double * k(i, 0) - 1.2251564463762044_c_double * k(i, &
+            5)) - 0.4957589496572502_c_double * k(i, 6)) + 1.6643771824549864_c_double * k(i, &
+            7)) - 0.35032884874997366_c_double * k(i, 8)) + 0.3341791187130175_c_double * k(i, &
+            9)) + 0.08192320648511571_c_double * k(i, 10)) - 0.022355307863886294_c_double * k(i, &
+            11)) / (atol + rtol * (merge(3.141592653589793_c_double, merge(abs(xnew(i)), &
+            abs(x(i)), abs(xnew(i)) > abs(x(i))), is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
+        e3 = ((((((((-0.18980075407240762_c_double) * k(i, 0) + 4.450312892752409_c_double * k(i, &
+            5)) + 1.8915178993145003_c_double * k(i, 6)) - 5.801203960010585_c_double * k(i, &
+            7)) - 0.4226823213237919_c_double * k(i, 8)) - 0.1521609496625161_c_double * k(i, &
+            9)) + 0.20136540080403034_c_double * k(i, 10)) + 0.02265179219836082_c_double * k(i, &
+            11)) / (atol + rtol * (merge(3.141592653589793_c_double, merge(abs(xnew(i)), &
+            abs(x(i)), abs(xnew(i)) > abs(x(i))), is_angle(i) * (merge(abs(xnew(i)), abs(x(i)), &
+            abs(xnew(i)) > abs(x(i)))) > 3.141592653589793_c_double)))
+        err5 = err5 + e5 * e5
+        err3 = err3 + e3 * e3
+      end do
+      deno = err5 + 1e-2_c_double * err3
+      err = merge((abs(h) * err5) / sqrt(nx * deno), 0.0_c_double, deno > 0.0_c_double)
+
+      ! check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken
+      stats%rhs_calls = stats%rhs_calls + (merge(11, 0, code < 0))
+      nonfinite = .not. ieee_is_finite(err)
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+      ok = code < 0 .and. .not. nonfinite .and. err <= 1.0_c_double
+      if (ok) then
+        call wheel_spinup_rhs(t + h, xnew, c, k(:, 12))  ! where the next step starts
+      end if
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. (ok .and. .not. ieee_is_finite(k(i, 12)))
+      end do
+      stats%rhs_calls = stats%rhs_calls + (merge(1, 0, ok))
+
+      ! control: accept or reject by selection, and the next h
+      run = code < 0
+      take = run .and. .not. nonfinite .and. err <= 1.0_c_double
+      lock = (merge(abs(wheel_spinup_cos(xnew(1))) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS, .false., &
+          (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+          1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+          gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+          1000000.0_c_double))) .or. abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= &
+          1.0_c_double
+      ok = take .and. .not. lock
+      fac = sqrt(sqrt(sqrt(err))) / 0.9_c_double  ! h / h_new, in Hairer's form
+      grow = max(0.16666666666666666_c_double, min(3.003003003003003_c_double, fac))
+      grow = merge(max(grow, 1.0_c_double), grow, rejected_last)  ! no growth after a rejection
+      code = merge(WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR, merge(WHEEL_SPINUP_ODE_OK, code, &
+          ok .and. last), take .and. lock)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, run .and. .not. take))
+      err_old = merge(max(err, 1e-4_c_double), err_old, ok)
+      rejected_last = merge(.false., merge(.true., rejected_last, run .and. .not. take), ok)
+      h = merge(h, merge(h * 0.333_c_double, merge(h / grow, h / min(3.003003003003003_c_double, &
+          fac), ok), nonfinite), .not. run .or. (take .and. lock))
+
+      ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
+      if (ok) then
+        call wheel_spinup_events(t, xnew, c, ev_end)
+        ev_need = merge(1, 0, g < ntimes .and. times(g) < t)
+        do ev_k = 0, 1 - 1
+          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
+              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k)))) then
+            ev_need = 1
+          end if
+        end do
+        if (ev_need /= 0) then
+
+          ! the dense output of order 7
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
+                0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
+                7)) - 0.12419142326381637_c_double * k(i, &
+                8)) + 0.15329179827876568_c_double * k(i, &
+                9)) + 0.00820105229563469_c_double * k(i, &
+                10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
+          end do
+          call wheel_spinup_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
+                0) + 0.028300909672366776_c_double * k(i, &
+                5)) + 0.053541988307438566_c_double * k(i, &
+                6)) - 0.05492374857139099_c_double * k(i, &
+                7)) - 0.00010834732869724932_c_double * k(i, &
+                10)) + 0.0003825710908356584_c_double * k(i, &
+                11)) - 0.00034046500868740456_c_double * k(i, &
+                12)) + 0.1413124436746325_c_double * k(i, 13))
+          end do
+          call wheel_spinup_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
+                0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
+                6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
+                8)) - 0.0013990241651590145_c_double * k(i, &
+                12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, &
+                14))
+          end do
+          call wheel_spinup_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
+          stats%rhs_calls = stats%rhs_calls + 3
+          do i = 0, nx - 1
+            dense(i, 0) = xnew(i) - x(i)
+            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+            dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
+            dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
+                0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
+                6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
+                8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
+                10)) + 0.6315787787694688_c_double * k(i, &
+                11)) - 0.08899033645133331_c_double * k(i, &
+                12)) + 18.148505520854727_c_double * k(i, &
+                13)) - 9.194632392478356_c_double * k(i, 14)) - 4.436036387594894_c_double * k(i, &
+                15))
+            dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
+                0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
+                6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
+                8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
+                10)) - 9.332130526430229_c_double * k(i, &
+                11)) + 15.697238121770845_c_double * k(i, &
+                12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
+                14)) + 35.81684148639408_c_double * k(i, 15))
+            dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
+                0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
+                6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
+                8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
+                10)) + 0.7777137798053443_c_double * k(i, &
+                11)) - 2.778205752353508_c_double * k(i, 12)) - 60.19669523126412_c_double * k(i, &
+                13)) + 84.32040550667716_c_double * k(i, 14)) + 11.99229113618279_c_double * k(i, &
+                15))
+            dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
+                0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
+                6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
+                8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
+                10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
+                12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
+                14)) - 149.72683625798564_c_double * k(i, 15))
+          end do
+        end if
+        ev_stop = t
+        ev_halt = -1
+        ev_ta = told
+        ev_j = 0
+        do
+          if (ev_j >= 1) then
+            exit
+          end if
+          ev_j = ev_j + 1
+          if (ev_j < 1) then
+            ev_tb = told + (t - told) * (real(ev_j, c_double) / 1.0_c_double)
+            do i = 0, nx - 1
+              ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
+                  0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
+                  1) + ((ev_tb - told) / hs) * (dense(i, &
+                  2) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
+                  3) + ((ev_tb - told) / hs) * (dense(i, &
+                  4) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
+                  5) + ((ev_tb - told) / hs) * dense(i, 6)))))))
+            end do
+            call wheel_spinup_events(ev_tb, ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_g(ev_k)
+            end do
+          else
+            ev_tb = t
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_end(ev_k)
+            end do
+          end if
+          do ev_k = 0, 1 - 1
+            ev_t(ev_k) = huge(1.0_c_double)
+            if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) >= &
+                0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                ev_new(ev_k) <= 0.0_c_double)) then
+              ev_a = ev_ta
+              ev_b = ev_tb
+              ev_ga = ev_old(ev_k)
+              ev_gb = ev_new(ev_k)
+              ev_side = 0
+              ev_it = 0
+              do
+                if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                  exit
+                end if
+                ev_it = ev_it + 1
+                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  exit
+                end if
+                do i = 0, nx - 1
+                  ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                      0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                      1) + ((ev_m - told) / hs) * (dense(i, &
+                      2) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                      3) + ((ev_m - told) / hs) * (dense(i, &
+                      4) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                      5) + ((ev_m - told) / hs) * dense(i, 6)))))))
+                end do
+                call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                ev_gm = ev_g(ev_k)
+                if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                    0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                  ev_a = ev_m
+                  ev_ga = ev_gm
+                  if (ev_side == -1) then
+                    ev_gb = 0.5_c_double * ev_gb
+                  end if
+                  ev_side = -1
+                else
+                  ev_b = ev_m
+                  ev_gb = ev_gm
+                  if (ev_side == 1) then
+                    ev_ga = 0.5_c_double * ev_ga
+                  end if
+                  ev_side = 1
+                end if
+              end do
+              ev_t(ev_k) = ev_b
+            else
+              if (ieee_is_finite(ev_old(ev_k)) .and. .not. ieee_is_finite(ev_new(ev_k))) then
+                ev_f = ev_ta
+                ev_gf = ev_old(ev_k)
+                ev_b = ev_tb
+                ev_it = 0
+                do
+                  if (ev_it >= 200) then
+                    exit
+                  end if
+                  ev_it = ev_it + 1
+                  ev_m = ev_f + 0.5_c_double * (ev_b - ev_f)
+                  if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
+                    exit
+                  end if
+                  do i = 0, nx - 1
+                    ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                        0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                        1) + ((ev_m - told) / hs) * (dense(i, &
+                        2) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                        3) + ((ev_m - told) / hs) * (dense(i, &
+                        4) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                        5) + ((ev_m - told) / hs) * dense(i, 6)))))))
+                  end do
+                  call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                  if (ieee_is_finite(ev_g(ev_k))) then
+                    ev_f = ev_m
+                    ev_gf = ev_g(ev_k)
+                  else
+                    ev_b = ev_m
+                  end if
+                end do
+                if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_gf >= &
+                    0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                    ev_gf <= 0.0_c_double)) then
+                  ev_a = ev_ta
+                  ev_b = ev_f
+                  ev_ga = ev_old(ev_k)
+                  ev_gb = ev_gf
+                  ev_side = 0
+                  ev_it = 0
+                  do
+                    if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                          0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          1) + ((ev_m - told) / hs) * (dense(i, &
+                          2) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          3) + ((ev_m - told) / hs) * (dense(i, &
+                          4) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          5) + ((ev_m - told) / hs) * dense(i, 6)))))))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    ev_gm = ev_g(ev_k)
+                    if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                        0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                      ev_a = ev_m
+                      ev_ga = ev_gm
+                      if (ev_side == -1) then
+                        ev_gb = 0.5_c_double * ev_gb
+                      end if
+                      ev_side = -1
+                    else
+                      ev_b = ev_m
+                      ev_gb = ev_gm
+                      if (ev_side == 1) then
+                        ev_ga = 0.5_c_double * ev_ga
+                      end if
+                      ev_side = 1
+                    end if
+                  end do
+                  ev_t(ev_k) = ev_b
+                end if
+              end if
+            end if
+          end do
+          do
+            ev_best = -1
+            do ev_k = 0, 1 - 1
+              if (ev_t(ev_k) < huge(1.0_c_double) .and. (ev_best < 0 .or. ev_t(ev_k) < &
+                  ev_t(ev_best))) then
+                ev_best = ev_k
+              end if
+            end do
+            if (ev_best < 0) then
+              exit
+            end if
+            if (nlog >= capacity) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL
+              exit
+            end if
+            do i = 0, nx - 1
+              ev_y(i) = x(i) + ((ev_t(ev_best) - told) / hs) * (dense(i, &
+                  0) + (1.0_c_double - (ev_t(ev_best) - told) / hs) * (dense(i, &
+                  1) + ((ev_t(ev_best) - told) / hs) * (dense(i, &
+                  2) + (1.0_c_double - (ev_t(ev_best) - told) / hs) * (dense(i, &
+                  3) + ((ev_t(ev_best) - told) / hs) * (dense(i, &
+                  4) + (1.0_c_double - (ev_t(ev_best) - told) / hs) * (dense(i, &
+                  5) + ((ev_t(ev_best) - told) / hs) * dense(i, 6)))))))
+            end do
+            log_t(nlog) = ev_t(ev_best)
+            log_k(nlog) = ev_best
+            do i = 0, nx - 1
+              log_x(i, nlog) = ev_y(i)
+            end do
+            nlog = nlog + 1
+            if (ev_term(ev_best) /= 0) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_EVENT
+              exit
+            end if
+            ev_t(ev_best) = huge(1.0_c_double)
+          end do
+          if (ev_halt >= 0) then
+            exit
+          end if
+          do ev_k = 0, 1 - 1
+            ev_old(ev_k) = ev_new(ev_k)
+          end do
+          ev_ta = ev_tb
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < ev_stop)) then
+            exit
+          end if
+          frac = (times(g) - told) / hs
+          do i = 0, nx - 1
+            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+                1) + frac * (dense(i, 2) + (1.0_c_double - frac) * (dense(i, &
+                3) + frac * (dense(i, 4) + (1.0_c_double - frac) * (dense(i, 5) + frac * dense(i, &
+                6)))))))
+          end do
+          g = g + 1
+        end do
+        if (ev_halt >= 0) then
+          do i = 0, nx - 1
+            ev_y(i) = x(i) + ((ev_stop - told) / hs) * (dense(i, &
+                0) + (1.0_c_double - (ev_stop - told) / hs) * (dense(i, &
+                1) + ((ev_stop - told) / hs) * (dense(i, &
+                2) + (1.0_c_double - (ev_stop - told) / hs) * (dense(i, &
+                3) + ((ev_stop - told) / hs) * (dense(i, &
+                4) + (1.0_c_double - (ev_stop - told) / hs) * (dense(i, &
+                5) + ((ev_stop - told) / hs) * dense(i, 6)))))))
+          end do
+          do i = 0, nx - 1
+            x(i) = ev_y(i)
+          end do
+          t = ev_stop
+          stats%t = t
+          if (g < ntimes) then
+            if (times(g) <= t) then
+              do i = 0, nx - 1
+                out(i, g) = x(i)
+              end do
+              g = g + 1
+            end if
+          end if
+          res = ev_halt
+          return
+        end if
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
+        do i = 0, nx - 1
+          k(i, 0) = k(i, 12)
+        end do
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+      end if
+      if (code >= 0) then
+        res = code
+        return
+      end if
+    end do
+  end function dop853_events
+
   ! DOP853 (Hairer's coefficients and error estimator), adaptive.
   function wheel_spinup_dop853(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_dop853")
@@ -2444,6 +3848,32 @@ contains
     code = dop853_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
   end function wheel_spinup_dop853_grid
 
+  ! DOP853 (Hairer's coefficients and error estimator), adaptive.
+  ! Over an output grid, with the scene's events located (see wheel_spinup_ode.h).
+  function wheel_spinup_dop853_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      capacity, log_t, log_k, log_x, nlog, stats_ptr) result(code) &
+      bind(C, name="wheel_spinup_f_dop853_events")
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long))
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long))
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long))
+    integer(c_long), intent(out) :: nlog
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
+    integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = dop853_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+        log_k, log_x, nlog, stats)
+  end function wheel_spinup_dop853_events
+
   ! stats, codes: NULL when not wanted.
   function wheel_spinup_dop853_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
       stats, codes) result(failed) &
@@ -2481,6 +3911,49 @@ contains
     end do
     !$omp end parallel do
   end function wheel_spinup_dop853_grid_batch
+
+  ! stats, codes: NULL when not wanted.
+  function wheel_spinup_dop853_events_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, capacity, log_t, log_k, log_x, nlog, stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_dop853_events_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long), n)
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long), n)
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long), n)
+    integer(c_long), intent(inout) :: nlog(n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(wheel_spinup_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = wheel_spinup_dop853_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), &
+            c_loc(stats_out(i)))
+      else
+        code = wheel_spinup_dop853_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function wheel_spinup_dop853_events_batch
 
   ! Rodas4 (Hairer & Wanner, Solving ODEs II, Sec. IV.7; the coefficients of
   ! Hairer's rodas.f): with E = I/(h gamma) - J, stage s solves
@@ -2782,12 +4255,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -2960,12 +4428,7 @@ contains
       stats%h = h
 
       ! E = I/(h gamma) - J
-      do i = 0, nx * nx - 1
-        lu(i) = -J(i)
-      end do
-      do i = 0, nx - 1
-        lu(i * nx + i) = lu(i * nx + i) + 1.0_c_double / (h * 0.25_c_double)
-      end do
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
       stats%decompositions = stats%decompositions + 1
       if (lu_decompose(lu, piv)) then
         stats%rejected = stats%rejected + 1
@@ -3054,6 +4517,464 @@ contains
   end function rodas4_grid
 
   ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! J and f are evaluated once per accepted step; a rejected step only
+  ! refactors E with the new h. Step size as Hairer's rodas.f: h_new/h = 0.9
+  ! err^-0.25 within [0.2, 6], and Gustafsson's predictive controller after an
+  ! accepted step.
+  ! A singular E is retried with h times 0.5, 5 times in a row at most.
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function rodas4_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+          log_k, log_x, nlog, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    integer(c_long), intent(in) :: capacity
+    integer(c_long), intent(out) :: nlog
+    type(wheel_spinup_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    real(c_double), intent(out) :: log_t(0:capacity - 1)
+    integer(c_int), intent(out) :: log_k(0:capacity - 1)
+    real(c_double), intent(out) :: log_x(0:nx - 1, 0:capacity - 1)
+    integer(c_int) :: res
+    real(c_double) :: J(0:nx * nx - 1)
+    real(c_double) :: lu(0:nx * nx - 1)
+    real(c_double) :: k(0:nx - 1, 0:5)
+    real(c_double) :: f0(0:nx - 1)
+    real(c_double) :: fnew(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: piv(0:nx - 1)
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: err
+    real(c_double) :: fac
+    real(c_double) :: gus
+    real(c_double) :: h_acc
+    real(c_double) :: err_acc
+    logical :: last
+    logical :: rejected_last
+    logical :: nonfinite
+    logical :: new_point
+    integer(c_int) :: singular
+    integer(c_int) :: start
+    real(c_double) :: dense(0:nx - 1, 0:1)
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: frac
+    integer(c_int), parameter :: ev_dir(0:0) = [1]
+    integer(c_int), parameter :: ev_term(0:0) = [0]
+    real(c_double) :: ev_old(0:0)
+    real(c_double) :: ev_new(0:0)
+    real(c_double) :: ev_end(0:0)
+    real(c_double) :: ev_g(0:0)
+    real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_y(0:nx - 1)
+    real(c_double) :: ev_a
+    real(c_double) :: ev_b
+    real(c_double) :: ev_ga
+    real(c_double) :: ev_gb
+    real(c_double) :: ev_m
+    real(c_double) :: ev_gm
+    real(c_double) :: ev_f
+    real(c_double) :: ev_gf
+    real(c_double) :: ev_stop
+    real(c_double) :: ev_ta
+    real(c_double) :: ev_tb
+    integer(c_int) :: ev_side
+    integer(c_int) :: ev_best
+    integer(c_int) :: ev_halt
+    integer(c_int) :: ev_it
+    integer(c_int) :: ev_j
+    integer(c_int) :: ev_need
+    integer(c_int) :: ev_k
+    integer(c_int) :: i
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = WHEEL_SPINUP_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    nlog = 0
+    start = ode_start(4, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
+    if (start <= WHEEL_SPINUP_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+      call wheel_spinup_events(t0, x, c, ev_old)
+    end if
+    if (start >= 0) then
+      res = start
+      return
+    end if
+    t = t0
+    h_acc = 0.0_c_double
+    err_acc = 1e-2_c_double
+    rejected_last = .false.
+    nonfinite = .false.
+    singular = 0
+    new_point = .true.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    do
+      if (new_point) then
+        call wheel_spinup_jac(t, x, c, J)
+        stats%jac_calls = stats%jac_calls + 1
+        if (.not. all_finite(J, nx * nx)) then
+          res = WHEEL_SPINUP_ODE_ERR_NONFINITE
+          return
+        end if
+        new_point = .false.
+      end if
+      if (step_underflow(h, t)) then
+        res = merge(WHEEL_SPINUP_ODE_ERR_NONFINITE, WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        return
+      end if
+      if (stats%accepted + stats%rejected >= max_steps) then
+        res = WHEEL_SPINUP_ODE_ERR_MAX_STEPS
+        return
+      end if
+      last = t + 1.01_c_double * h >= t1
+      if (last) then
+        h = t1 - t
+      end if
+      stats%h = h
+
+      ! E = I/(h gamma) - J
+      call lu_shift(J, 1.0_c_double / (h * 0.25_c_double), lu)
+      stats%decompositions = stats%decompositions + 1
+      if (lu_decompose(lu, piv)) then
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+        singular = singular + 1
+        if (singular == 5) then
+          res = WHEEL_SPINUP_ODE_ERR_SINGULAR
+          return
+        end if
+        h = h * 0.5_c_double
+        cycle
+      end if
+      singular = 0
+      err = rodas4_grid_trial(t, h, x, f0, lu, piv, c, rtol, atol, comp, k, dx, xnew, dense)
+      stats%rhs_calls = stats%rhs_calls + 5
+      nonfinite = .not. ieee_is_finite(err) .or. .not. all_finite(xnew, nx)
+      if (.not. nonfinite .and. err <= 1.0_c_double .and. .not. last) then
+        call wheel_spinup_rhs(t + h, xnew, c, fnew)  ! where the next step starts
+        stats%rhs_calls = stats%rhs_calls + 1
+        nonfinite = .not. all_finite(fnew, nx)
+      end if
+      if (nonfinite) then
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+        h = h * 0.2_c_double
+        cycle
+      end if
+      fac = max(0.16666666666666666_c_double, min(5.0_c_double, err**0.25_c_double / 0.9_c_double))  ! h / h_new
+      if (err <= 1.0_c_double) then
+        if (gimbal_lock(x, xnew)) then
+          res = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
+        if (stats%accepted > 0) then
+          gus = ((h_acc / h) * ((err * err) / err_acc)**0.25_c_double) / 0.9_c_double
+          fac = max(fac, max(0.16666666666666666_c_double, min(5.0_c_double, gus)))
+        end if
+        h_acc = h
+        err_acc = max(1e-2_c_double, err)
+        call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)
+        ev_need = merge(1, 0, g < ntimes .and. times(g) < (merge(t1, t + h, last)))
+        do ev_k = 0, 1 - 1
+          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
+              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k)))) then
+            ev_need = 1
+          end if
+        end do
+        if (ev_need /= 0) then
+        end if
+        ev_stop = merge(t1, t + h, last)
+        ev_halt = -1
+        ev_ta = t
+        ev_j = 0
+        do
+          if (ev_j >= 1) then
+            exit
+          end if
+          ev_j = ev_j + 1
+          if (ev_j < 1) then
+            ev_tb = t + ((merge(t1, t + h, last)) - t) * (real(ev_j, c_double) / 1.0_c_double)
+            do i = 0, nx - 1
+              ev_y(i) = x(i) * (1.0_c_double - (ev_tb - t) / h) + ((ev_tb - t) / h) * (xnew(i) + &
+                  (1.0_c_double - (ev_tb - t) / h) * (dense(i, 0) + ((ev_tb - t) / h) * dense(i, &
+                  1)))
+            end do
+            call wheel_spinup_events(ev_tb, ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_g(ev_k)
+            end do
+          else
+            ev_tb = merge(t1, t + h, last)
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_end(ev_k)
+            end do
+          end if
+          do ev_k = 0, 1 - 1
+            ev_t(ev_k) = huge(1.0_c_double)
+            if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) >= &
+                0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                ev_new(ev_k) <= 0.0_c_double)) then
+              ev_a = ev_ta
+              ev_b = ev_tb
+              ev_ga = ev_old(ev_k)
+              ev_gb = ev_new(ev_k)
+              ev_side = 0
+              ev_it = 0
+              do
+                if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                  exit
+                end if
+                ev_it = ev_it + 1
+                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  exit
+                end if
+                do i = 0, nx - 1
+                  ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * (xnew(i) &
+                      + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
+                      0) + ((ev_m - t) / h) * dense(i, 1)))
+                end do
+                call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                ev_gm = ev_g(ev_k)
+                if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                    0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                  ev_a = ev_m
+                  ev_ga = ev_gm
+                  if (ev_side == -1) then
+                    ev_gb = 0.5_c_double * ev_gb
+                  end if
+                  ev_side = -1
+                else
+                  ev_b = ev_m
+                  ev_gb = ev_gm
+                  if (ev_side == 1) then
+                    ev_ga = 0.5_c_double * ev_ga
+                  end if
+                  ev_side = 1
+                end if
+              end do
+              ev_t(ev_k) = ev_b
+            else
+              if (ieee_is_finite(ev_old(ev_k)) .and. .not. ieee_is_finite(ev_new(ev_k))) then
+                ev_f = ev_ta
+                ev_gf = ev_old(ev_k)
+                ev_b = ev_tb
+                ev_it = 0
+                do
+                  if (ev_it >= 200) then
+                    exit
+                  end if
+                  ev_it = ev_it + 1
+                  ev_m = ev_f + 0.5_c_double * (ev_b - ev_f)
+                  if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
+                    exit
+                  end if
+                  do i = 0, nx - 1
+                    ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
+                        (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
+                        0) + ((ev_m - t) / h) * dense(i, 1)))
+                  end do
+                  call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                  if (ieee_is_finite(ev_g(ev_k))) then
+                    ev_f = ev_m
+                    ev_gf = ev_g(ev_k)
+                  else
+                    ev_b = ev_m
+                  end if
+                end do
+                if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_gf >= &
+                    0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                    ev_gf <= 0.0_c_double)) then
+                  ev_a = ev_ta
+                  ev_b = ev_f
+                  ev_ga = ev_old(ev_k)
+                  ev_gb = ev_gf
+                  ev_side = 0
+                  ev_it = 0
+                  do
+                    if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
+                          (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
+                          0) + ((ev_m - t) / h) * dense(i, 1)))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    ev_gm = ev_g(ev_k)
+                    if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                        0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                      ev_a = ev_m
+                      ev_ga = ev_gm
+                      if (ev_side == -1) then
+                        ev_gb = 0.5_c_double * ev_gb
+                      end if
+                      ev_side = -1
+                    else
+                      ev_b = ev_m
+                      ev_gb = ev_gm
+                      if (ev_side == 1) then
+                        ev_ga = 0.5_c_double * ev_ga
+                      end if
+                      ev_side = 1
+                    end if
+                  end do
+                  ev_t(ev_k) = ev_b
+                end if
+              end if
+            end if
+          end do
+          do
+            ev_best = -1
+            do ev_k = 0, 1 - 1
+              if (ev_t(ev_k) < huge(1.0_c_double) .and. (ev_best < 0 .or. ev_t(ev_k) < &
+                  ev_t(ev_best))) then
+                ev_best = ev_k
+              end if
+            end do
+            if (ev_best < 0) then
+              exit
+            end if
+            if (nlog >= capacity) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL
+              exit
+            end if
+            do i = 0, nx - 1
+              ev_y(i) = x(i) * (1.0_c_double - (ev_t(ev_best) - t) / h) + ((ev_t(ev_best) - t) / &
+                  h) * (xnew(i) + (1.0_c_double - (ev_t(ev_best) - t) / h) * (dense(i, &
+                  0) + ((ev_t(ev_best) - t) / h) * dense(i, 1)))
+            end do
+            log_t(nlog) = ev_t(ev_best)
+            log_k(nlog) = ev_best
+            do i = 0, nx - 1
+              log_x(i, nlog) = ev_y(i)
+            end do
+            nlog = nlog + 1
+            if (ev_term(ev_best) /= 0) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_EVENT
+              exit
+            end if
+            ev_t(ev_best) = huge(1.0_c_double)
+          end do
+          if (ev_halt >= 0) then
+            exit
+          end if
+          do ev_k = 0, 1 - 1
+            ev_old(ev_k) = ev_new(ev_k)
+          end do
+          ev_ta = ev_tb
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < ev_stop)) then
+            exit
+          end if
+          frac = (times(g) - t) / h
+          do i = 0, nx - 1
+            out(i, g) = x(i) * (1.0_c_double - frac) + frac * (xnew(i) + (1.0_c_double - frac) * &
+                (dense(i, 0) + frac * dense(i, 1)))
+          end do
+          g = g + 1
+        end do
+        if (ev_halt >= 0) then
+          do i = 0, nx - 1
+            ev_y(i) = x(i) * (1.0_c_double - (ev_stop - t) / h) + ((ev_stop - t) / h) * (xnew(i) &
+                + (1.0_c_double - (ev_stop - t) / h) * (dense(i, &
+                0) + ((ev_stop - t) / h) * dense(i, 1)))
+          end do
+          do i = 0, nx - 1
+            x(i) = ev_y(i)
+          end do
+          t = ev_stop
+          stats%t = t
+          stats%accepted = stats%accepted + 1
+          if (g < ntimes) then
+            if (times(g) <= t) then
+              do i = 0, nx - 1
+                out(i, g) = x(i)
+              end do
+              g = g + 1
+            end if
+          end if
+          res = ev_halt
+          return
+        end if
+        call accept_step(x, xnew, dx, comp)
+        t = merge(t1, t + h, last)
+        stats%t = t
+        stats%accepted = stats%accepted + 1
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+        if (last) then
+          res = WHEEL_SPINUP_ODE_OK
+          return
+        end if
+        do i = 0, nx - 1
+          f0(i) = fnew(i)
+        end do
+        new_point = .true.
+        if (rejected_last) then
+          fac = max(fac, 1.0_c_double)
+        end if
+        rejected_last = .false.
+      else
+        stats%rejected = stats%rejected + 1
+        rejected_last = .true.
+      end if
+      h = h / fac
+    end do
+  end function rodas4_events
+
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
   function wheel_spinup_rodas4(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_rodas4")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
@@ -3090,6 +5011,32 @@ contains
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = rodas4_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
   end function wheel_spinup_rodas4_grid
+
+  ! Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
+  ! Over an output grid, with the scene's events located (see wheel_spinup_ode.h).
+  function wheel_spinup_rodas4_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      capacity, log_t, log_k, log_x, nlog, stats_ptr) result(code) &
+      bind(C, name="wheel_spinup_f_rodas4_events")
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long))
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long))
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long))
+    integer(c_long), intent(out) :: nlog
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
+    integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = rodas4_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+        log_k, log_x, nlog, stats)
+  end function wheel_spinup_rodas4_events
 
   ! stats, codes: NULL when not wanted.
   function wheel_spinup_rodas4_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
@@ -3129,6 +5076,49 @@ contains
     !$omp end parallel do
   end function wheel_spinup_rodas4_grid_batch
 
+  ! stats, codes: NULL when not wanted.
+  function wheel_spinup_rodas4_events_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, capacity, log_t, log_k, log_x, nlog, stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_rodas4_events_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long), n)
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long), n)
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long), n)
+    integer(c_long), intent(inout) :: nlog(n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(wheel_spinup_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = wheel_spinup_rodas4_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), &
+            c_loc(stats_out(i)))
+      else
+        code = wheel_spinup_rodas4_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function wheel_spinup_rodas4_events_batch
+
   ! E1 and E2 for this h, factored; 1 when either is singular.
   function radau5_factor(J, h, e1, piv1, e2r, e2i, piv2) result(res)
     real(c_double), intent(in) :: h
@@ -3139,23 +5129,10 @@ contains
     real(c_double), intent(out) :: e2i(0:nx * nx - 1)
     integer(c_int), intent(out) :: piv2(0:nx - 1)
     logical :: res
-    real(c_double) :: gamma_h
-    real(c_double) :: alpha_h
-    integer(c_int) :: i
 
-    gamma_h = 3.637834252744496_c_double / h
-    alpha_h = 2.6810828736277523_c_double / h
-    do i = 0, nx * nx - 1
-      e1(i) = -J(i)
-      e2r(i) = -J(i)
-      e2i(i) = 0.0_c_double
-    end do
-    !GCC$ unroll 1
-    do i = 0, nx - 1
-      e1(i * nx + i) = e1(i * nx + i) + gamma_h
-      e2r(i * nx + i) = e2r(i * nx + i) + alpha_h
-      e2i(i * nx + i) = 3.0504301992474105_c_double / h
-    end do
+    call lu_shift(J, 3.637834252744496_c_double / h, e1)
+    call lu_shift_complex(J, 2.6810828736277523_c_double / h, 3.0504301992474105_c_double / h, &
+        e2r, e2i)
     if (lu_decompose(e1, piv1)) then
       res = .true.
       return
@@ -4074,6 +6051,682 @@ contains
   end function radau5_grid
 
   ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Hairer's radau5.f strategy: the error test's tolerances are
+  ! rtol' = 0.1 rtol^(2/3) and atol' = rtol' atol/rtol;
+  ! h_new/h = fac err^-1/4
+  ! within [0.2, 8] (fac = 0.9, less after many Newton iterations), and
+  ! Gustafsson's predictive controller after an accepted step.
+  ! J is kept while the Newton iterations contract by <= 0.001 a step, and
+  ! h, E1 and E2 too while h_new/h is within [1, 1.2]. Newton iterations that
+  ! diverge, take more than 7, or meet a NaN or Inf
+  ! retry with h halved (slow ones with a smaller h); a singular E1 or E2 too, 5
+  ! times in a row at most.
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function radau5_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+          log_k, log_x, nlog, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    integer(c_long), intent(in) :: capacity
+    integer(c_long), intent(out) :: nlog
+    type(wheel_spinup_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    real(c_double), intent(out) :: log_t(0:capacity - 1)
+    integer(c_int), intent(out) :: log_k(0:capacity - 1)
+    real(c_double), intent(out) :: log_x(0:nx - 1, 0:capacity - 1)
+    integer(c_int) :: res
+    real(c_double) :: J(0:nx * nx - 1)
+    real(c_double) :: e1(0:nx * nx - 1)
+    real(c_double) :: e2r(0:nx * nx - 1)
+    real(c_double) :: e2i(0:nx * nx - 1)
+    real(c_double) :: z1(0:nx - 1)
+    real(c_double) :: z2(0:nx - 1)
+    real(c_double) :: z3(0:nx - 1)
+    real(c_double) :: w1(0:nx - 1)
+    real(c_double) :: w2(0:nx - 1)
+    real(c_double) :: w3(0:nx - 1)
+    real(c_double) :: ak1(0:nx - 1)
+    real(c_double) :: ak2(0:nx - 1)
+    real(c_double) :: ak3(0:nx - 1)
+    real(c_double) :: f0(0:nx - 1)
+    real(c_double) :: fnew(0:nx - 1)
+    real(c_double) :: scal(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: piv1(0:nx - 1)
+    integer(c_int) :: piv2(0:nx - 1)
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: h_old
+    real(c_double) :: h_new
+    real(c_double) :: h_acc
+    real(c_double) :: err_acc
+    real(c_double) :: rtol_e
+    real(c_double) :: atol_e
+    real(c_double) :: newton_tol
+    real(c_double) :: err
+    real(c_double) :: quot
+    real(c_double) :: rate
+    real(c_double) :: theta
+    real(c_double) :: theta_old
+    real(c_double) :: dyno
+    real(c_double) :: dyno_old
+    real(c_double) :: thq
+    real(c_double) :: predicted
+    real(c_double) :: q
+    real(c_double) :: gus
+    real(c_double) :: c1q
+    real(c_double) :: c2q
+    real(c_double) :: c3q
+    real(c_double) :: theta_k
+    logical :: last
+    logical :: first
+    logical :: reject
+    logical :: fresh_jac
+    logical :: need_jac
+    logical :: need_lu
+    logical :: nonfinite
+    integer(c_int) :: newt
+    integer(c_int) :: outcome
+    integer(c_int) :: singular
+    integer(c_int) :: start
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: frac
+    integer(c_int), parameter :: ev_dir(0:0) = [1]
+    integer(c_int), parameter :: ev_term(0:0) = [0]
+    real(c_double) :: ev_old(0:0)
+    real(c_double) :: ev_new(0:0)
+    real(c_double) :: ev_end(0:0)
+    real(c_double) :: ev_g(0:0)
+    real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_y(0:nx - 1)
+    real(c_double) :: ev_a
+    real(c_double) :: ev_b
+    real(c_double) :: ev_ga
+    real(c_double) :: ev_gb
+    real(c_double) :: ev_m
+    real(c_double) :: ev_gm
+    real(c_double) :: ev_f
+    real(c_double) :: ev_gf
+    real(c_double) :: ev_stop
+    real(c_double) :: ev_ta
+    real(c_double) :: ev_tb
+    integer(c_int) :: ev_side
+    integer(c_int) :: ev_best
+    integer(c_int) :: ev_halt
+    integer(c_int) :: ev_it
+    integer(c_int) :: ev_j
+    integer(c_int) :: ev_need
+    real(c_double), parameter :: is_angle(0:7) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
+        1.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
+    real(c_double) :: a1
+    real(c_double) :: a2
+    real(c_double) :: a3
+    real(c_double) :: ak
+    integer(c_int) :: ev_k
+    integer(c_int) :: i
+    integer(c_int) :: k
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = WHEEL_SPINUP_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    nlog = 0
+    start = ode_start(5, WHEEL_SPINUP_ODE_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &
+        h, stats)
+    if (start <= WHEEL_SPINUP_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+      call wheel_spinup_events(t0, x, c, ev_old)
+    end if
+    if (start >= 0) then
+      res = start
+      return
+    end if
+    t = t0
+    h_old = 1.0_c_double
+    rate = 1.0_c_double
+    theta_old = 1.0_c_double
+    dyno_old = 1.0_c_double
+    h_acc = 0.0_c_double
+    err_acc = 1e-2_c_double
+    last = .false.
+    first = .true.
+    reject = .false.
+    fresh_jac = .false.
+    need_jac = .true.
+    need_lu = .true.
+    nonfinite = .false.
+    singular = 0
+    !GCC$ unroll 1
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+      ak1(i) = 0.0_c_double
+      ak2(i) = 0.0_c_double
+      ak3(i) = 0.0_c_double
+    end do
+    rtol_e = 0.1_c_double * rtol**0.6666666666666666_c_double
+    atol_e = rtol_e * (atol / rtol)
+    newton_tol = max((10.0_c_double * (0.5_c_double * epsilon(1.0_c_double))) / rtol_e, &
+        min(0.03_c_double, sqrt(rtol_e)))
+    if (t + 1.01_c_double * h >= t1) then
+      h = t1 - t
+      last = .true.
+    end if
+    !GCC$ unroll 1
+    do i = 0, nx - 1
+      scal(i) = atol_e + rtol_e * (merge(3.141592653589793_c_double, abs(x(i)), &
+          is_angle(i) * abs(x(i)) > 3.141592653589793_c_double))
+    end do
+    do
+      if (need_jac) then
+        call wheel_spinup_jac(t, x, c, J)
+        stats%jac_calls = stats%jac_calls + 1
+        if (.not. all_finite(J, nx * nx)) then
+          res = WHEEL_SPINUP_ODE_ERR_NONFINITE
+          return
+        end if
+        fresh_jac = .true.
+        need_jac = .false.
+        need_lu = .true.
+      end if
+      if (step_underflow(h, t)) then
+        res = merge(WHEEL_SPINUP_ODE_ERR_NONFINITE, WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW, nonfinite)
+        return
+      end if
+      if (stats%accepted + stats%rejected >= max_steps) then
+        res = WHEEL_SPINUP_ODE_ERR_MAX_STEPS
+        return
+      end if
+      if (need_lu) then
+        stats%decompositions = stats%decompositions + 1
+        if (radau5_factor(J, h, e1, piv1, e2r, e2i, piv2)) then
+          singular = singular + 1
+          if (singular == 5) then
+            res = WHEEL_SPINUP_ODE_ERR_SINGULAR
+            return
+          end if
+          stats%rejected = stats%rejected + 1
+          reject = .true.
+          last = .false.
+          h = h * 0.5_c_double
+          need_jac = .not. fresh_jac
+          cycle
+        end if
+        singular = 0
+        need_lu = .false.
+      end if
+      stats%h = h
+
+      ! the Newton iterations start from the last step's collocation polynomial
+      if (first) then
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          z1(i) = 0.0_c_double
+          z2(i) = 0.0_c_double
+          z3(i) = 0.0_c_double
+          w1(i) = 0.0_c_double
+          w2(i) = 0.0_c_double
+          w3(i) = 0.0_c_double
+        end do
+      else
+        c3q = h / h_old
+        c1q = 0.1550510257216822_c_double * c3q
+        c2q = 0.6449489742783178_c_double * c3q
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          a1 = c1q * (ak1(i) + (c1q + 0.35505102572168223_c_double) * (ak2(i) + (c1q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          a2 = c2q * (ak1(i) + (c2q + 0.35505102572168223_c_double) * (ak2(i) + (c2q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          a3 = c3q * (ak1(i) + (c3q + 0.35505102572168223_c_double) * (ak2(i) + (c3q + &
+              0.8449489742783178_c_double) * ak3(i)))
+          z1(i) = a1
+          z2(i) = a2
+          z3(i) = a3
+          w1(i) = (4.325579890063155_c_double * a1 + 0.33919925181580984_c_double * a2) + &
+              0.5417705399358749_c_double * a3
+          w2(i) = ((-4.178718591551905_c_double) * a1 - 0.32768282076106237_c_double * a2) + &
+              0.47662355450055044_c_double * a3
+          w3(i) = ((-0.5028726349457868_c_double) * a1 + 2.571926949855605_c_double * a2) - &
+              0.5960392048282249_c_double * a3
+        end do
+      end if
+
+      ! outcome: 0 converged, 1 too slowly (h reduced), 2 failed
+      outcome = 0
+      rate = max(rate, 0.5_c_double * epsilon(1.0_c_double))**0.8_c_double
+      theta = 1e-3_c_double
+      newt = 0
+      do
+        if (newt >= 7) then
+          outcome = 2
+          exit
+        end if
+        dyno = radau5_newton(t, h, x, c, e1, piv1, e2r, e2i, piv2, scal, z1, z2, z3, w1, w2, w3)
+        stats%rhs_calls = stats%rhs_calls + 3
+        newt = newt + 1
+        if (.not. ieee_is_finite(dyno)) then
+          nonfinite = .true.
+          outcome = 2
+          exit
+        end if
+        if (newt > 1 .and. newt < 7) then
+          thq = dyno / dyno_old
+          theta = merge(thq, sqrt(thq * theta_old), newt == 2)
+          theta_old = thq
+          if (.not. (theta < 0.99_c_double)) then
+            outcome = 2
+            exit
+          end if
+          rate = theta / (1.0_c_double - theta)
+          theta_k = 1.0_c_double
+          do k = newt, 6 - 1
+            theta_k = theta_k * theta
+          end do
+          predicted = ((rate * dyno) * theta_k) / newton_tol
+          if (predicted >= 1.0_c_double) then
+            q = max(1e-4_c_double, min(20.0_c_double, predicted))
+            h = h * (0.8_c_double * q**((-1.0_c_double) / (10 - newt)))
+            outcome = 1
+            exit
+          end if
+        end if
+        dyno_old = max(dyno, 0.5_c_double * epsilon(1.0_c_double))
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          a1 = w1(i) + z1(i)
+          a2 = w2(i) + z2(i)
+          a3 = w3(i) + z3(i)
+          w1(i) = a1
+          w2(i) = a2
+          w3(i) = a3
+          z1(i) = (0.09123239487089295_c_double * a1 - 0.1412552950209542_c_double * a2) - &
+              0.030029194105147424_c_double * a3
+          z2(i) = (0.241717932707107_c_double * a1 + 0.20412935229379994_c_double * a2) + &
+              0.3829421127572619_c_double * a3
+          z3(i) = 0.966048182615093_c_double * a1 + a2
+        end do
+        if (.not. (rate * dyno > newton_tol)) then
+          exit
+        end if
+      end do
+      if (outcome == 0) then
+        err = radau5_error(t, h, x, c, f0, e1, piv1, scal, z1, z2, z3, first .or. reject, stats)
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          dx(i) = z3(i) - comp(i)
+          xnew(i) = x(i) + dx(i)
+        end do
+        if (err < 1.0_c_double .and. .not. last) then
+          call wheel_spinup_rhs(t + h, xnew, c, fnew)  ! where the next step starts
+          stats%rhs_calls = stats%rhs_calls + 1
+          nonfinite = .not. all_finite(fnew, nx)
+        else
+          nonfinite = .not. ieee_is_finite(err)
+        end if
+        nonfinite = nonfinite .or. .not. all_finite(xnew, nx)
+        if (nonfinite) then
+          outcome = 2
+        end if
+      end if
+      if (outcome /= 0) then
+        stats%rejected = stats%rejected + 1
+        reject = .true.
+        last = .false.
+        if (outcome == 2) then
+          h = h * 0.5_c_double
+        end if
+        need_lu = .true.
+        need_jac = .not. fresh_jac
+        cycle
+      end if
+      quot = max(0.125_c_double, min(5.0_c_double, err**0.25_c_double / min(0.9_c_double, &
+          13.5_c_double / (newt + 14))))  ! h_new = h / quot
+      h_new = h / quot
+      if (err < 1.0_c_double) then
+        if (gimbal_lock(x, xnew)) then
+          res = WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR  ! x: the state before this step
+          return
+        end if
+        first = .false.
+        if (stats%accepted > 0) then
+          gus = ((h_acc / h) * ((err * err) / err_acc)**0.25_c_double) / 0.9_c_double
+          quot = max(quot, max(0.125_c_double, min(5.0_c_double, gus)))
+          h_new = h / quot
+        end if
+        h_acc = h
+        err_acc = max(1e-2_c_double, err)
+        h_old = h
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          ak = (z2(i) - z1(i)) / 0.4898979485566356_c_double
+          ak1(i) = (z3(i) - z2(i)) / 0.35505102572168223_c_double
+          ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
+          ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
+        end do
+        call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)
+        ev_need = merge(1, 0, g < ntimes .and. times(g) < (merge(t1, t + h, last)))
+        do ev_k = 0, 1 - 1
+          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
+              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k)))) then
+            ev_need = 1
+          end if
+        end do
+        if (ev_need /= 0) then
+        end if
+        ev_stop = merge(t1, t + h, last)
+        ev_halt = -1
+        ev_ta = t
+        ev_j = 0
+        do
+          if (ev_j >= 1) then
+            exit
+          end if
+          ev_j = ev_j + 1
+          if (ev_j < 1) then
+            ev_tb = t + ((merge(t1, t + h, last)) - t) * (real(ev_j, c_double) / 1.0_c_double)
+            do i = 0, nx - 1
+              ev_y(i) = xnew(i) + ((ev_tb - (merge(t1, t + h, &
+                  last))) / h) * (ak1(i) + ((ev_tb - (merge(t1, t + h, &
+                  last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_tb - (merge(t1, &
+                  t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+            end do
+            call wheel_spinup_events(ev_tb, ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_g(ev_k)
+            end do
+          else
+            ev_tb = merge(t1, t + h, last)
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_end(ev_k)
+            end do
+          end if
+          do ev_k = 0, 1 - 1
+            ev_t(ev_k) = huge(1.0_c_double)
+            if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) >= &
+                0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                ev_new(ev_k) <= 0.0_c_double)) then
+              ev_a = ev_ta
+              ev_b = ev_tb
+              ev_ga = ev_old(ev_k)
+              ev_gb = ev_new(ev_k)
+              ev_side = 0
+              ev_it = 0
+              do
+                if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                  exit
+                end if
+                ev_it = ev_it + 1
+                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  exit
+                end if
+                do i = 0, nx - 1
+                  ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
+                      last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
+                      last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - (merge(t1, &
+                      t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+                end do
+                call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                ev_gm = ev_g(ev_k)
+                if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                    0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                  ev_a = ev_m
+                  ev_ga = ev_gm
+                  if (ev_side == -1) then
+                    ev_gb = 0.5_c_double * ev_gb
+                  end if
+                  ev_side = -1
+                else
+                  ev_b = ev_m
+                  ev_gb = ev_gm
+                  if (ev_side == 1) then
+                    ev_ga = 0.5_c_double * ev_ga
+                  end if
+                  ev_side = 1
+                end if
+              end do
+              ev_t(ev_k) = ev_b
+            else
+              if (ieee_is_finite(ev_old(ev_k)) .and. .not. ieee_is_finite(ev_new(ev_k))) then
+                ev_f = ev_ta
+                ev_gf = ev_old(ev_k)
+                ev_b = ev_tb
+                ev_it = 0
+                do
+                  if (ev_it >= 200) then
+                    exit
+                  end if
+                  ev_it = ev_it + 1
+                  ev_m = ev_f + 0.5_c_double * (ev_b - ev_f)
+                  if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
+                    exit
+                  end if
+                  do i = 0, nx - 1
+                    ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
+                        last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
+                        last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
+                        (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+                  end do
+                  call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                  if (ieee_is_finite(ev_g(ev_k))) then
+                    ev_f = ev_m
+                    ev_gf = ev_g(ev_k)
+                  else
+                    ev_b = ev_m
+                  end if
+                end do
+                if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_gf >= &
+                    0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                    ev_gf <= 0.0_c_double)) then
+                  ev_a = ev_ta
+                  ev_b = ev_f
+                  ev_ga = ev_old(ev_k)
+                  ev_gb = ev_gf
+                  ev_side = 0
+                  ev_it = 0
+                  do
+                    if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
+                          last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
+                          last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
+                          (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    ev_gm = ev_g(ev_k)
+                    if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                        0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                      ev_a = ev_m
+                      ev_ga = ev_gm
+                      if (ev_side == -1) then
+                        ev_gb = 0.5_c_double * ev_gb
+                      end if
+                      ev_side = -1
+                    else
+                      ev_b = ev_m
+                      ev_gb = ev_gm
+                      if (ev_side == 1) then
+                        ev_ga = 0.5_c_double * ev_ga
+                      end if
+                      ev_side = 1
+                    end if
+                  end do
+                  ev_t(ev_k) = ev_b
+                end if
+              end if
+            end if
+          end do
+          do
+            ev_best = -1
+            do ev_k = 0, 1 - 1
+              if (ev_t(ev_k) < huge(1.0_c_double) .and. (ev_best < 0 .or. ev_t(ev_k) < &
+                  ev_t(ev_best))) then
+                ev_best = ev_k
+              end if
+            end do
+            if (ev_best < 0) then
+              exit
+            end if
+            if (nlog >= capacity) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL
+              exit
+            end if
+            do i = 0, nx - 1
+              ev_y(i) = xnew(i) + ((ev_t(ev_best) - (merge(t1, t + h, &
+                  last))) / h) * (ak1(i) + ((ev_t(ev_best) - (merge(t1, t + h, &
+                  last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_t(ev_best) - &
+                  (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+            end do
+            log_t(nlog) = ev_t(ev_best)
+            log_k(nlog) = ev_best
+            do i = 0, nx - 1
+              log_x(i, nlog) = ev_y(i)
+            end do
+            nlog = nlog + 1
+            if (ev_term(ev_best) /= 0) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_EVENT
+              exit
+            end if
+            ev_t(ev_best) = huge(1.0_c_double)
+          end do
+          if (ev_halt >= 0) then
+            exit
+          end if
+          do ev_k = 0, 1 - 1
+            ev_old(ev_k) = ev_new(ev_k)
+          end do
+          ev_ta = ev_tb
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < ev_stop)) then
+            exit
+          end if
+          frac = (times(g) - (merge(t1, t + h, last))) / h
+          do i = 0, nx - 1
+            out(i, g) = xnew(i) + frac * (ak1(i) + (frac + 0.35505102572168223_c_double) * &
+                (ak2(i) + (frac + 0.8449489742783178_c_double) * ak3(i)))
+          end do
+          g = g + 1
+        end do
+        if (ev_halt >= 0) then
+          do i = 0, nx - 1
+            ev_y(i) = xnew(i) + ((ev_stop - (merge(t1, t + h, &
+                last))) / h) * (ak1(i) + ((ev_stop - (merge(t1, t + h, &
+                last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_stop - (merge(t1, &
+                t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+          end do
+          do i = 0, nx - 1
+            x(i) = ev_y(i)
+          end do
+          t = ev_stop
+          stats%t = t
+          stats%accepted = stats%accepted + 1
+          if (g < ntimes) then
+            if (times(g) <= t) then
+              do i = 0, nx - 1
+                out(i, g) = x(i)
+              end do
+              g = g + 1
+            end if
+          end if
+          res = ev_halt
+          return
+        end if
+        call accept_step(x, xnew, dx, comp)
+        t = merge(t1, t + h, last)
+        stats%t = t
+        stats%accepted = stats%accepted + 1
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+        if (last) then
+          res = WHEEL_SPINUP_ODE_OK
+          return
+        end if
+        !GCC$ unroll 1
+        do i = 0, nx - 1
+          f0(i) = fnew(i)
+          scal(i) = atol_e + rtol_e * (merge(3.141592653589793_c_double, abs(x(i)), &
+              is_angle(i) * abs(x(i)) > 3.141592653589793_c_double))
+        end do
+        fresh_jac = .false.
+        h_new = min(h_new, t1 - t0)
+        if (reject) then
+          h_new = min(h_new, h)
+        end if
+        reject = .false.
+        if (t + 1.01_c_double * h_new >= t1) then
+          h = t1 - t
+          last = .true.
+        else
+          if (theta <= 1e-3_c_double .and. h_new >= 1.0_c_double * h .and. h_new <= 1.2_c_double &
+              * h) then
+            cycle
+          else
+            h = h_new
+          end if
+        end if
+        need_lu = .true.
+        need_jac = theta > 1e-3_c_double
+      else
+        stats%rejected = stats%rejected + 1
+        reject = .true.
+        last = .false.
+        h = merge(h * 0.1_c_double, h_new, first)
+        need_lu = .true.
+        need_jac = .not. fresh_jac
+      end if
+    end do
+  end function radau5_events
+
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
   function wheel_spinup_radau5(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_radau5")
     real(c_double), value, intent(in) :: t0, t1, rtol, atol, h0
@@ -4110,6 +6763,32 @@ contains
     if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
     code = radau5_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
   end function wheel_spinup_radau5_grid
+
+  ! Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
+  ! Over an output grid, with the scene's events located (see wheel_spinup_ode.h).
+  function wheel_spinup_radau5_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      capacity, log_t, log_k, log_x, nlog, stats_ptr) result(code) &
+      bind(C, name="wheel_spinup_f_radau5_events")
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long))
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long))
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long))
+    integer(c_long), intent(out) :: nlog
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
+    integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = radau5_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+        log_k, log_x, nlog, stats)
+  end function wheel_spinup_radau5_events
 
   ! stats, codes: NULL when not wanted.
   function wheel_spinup_radau5_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
@@ -4148,6 +6827,49 @@ contains
     end do
     !$omp end parallel do
   end function wheel_spinup_radau5_grid_batch
+
+  ! stats, codes: NULL when not wanted.
+  function wheel_spinup_radau5_events_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, capacity, log_t, log_k, log_x, nlog, stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_radau5_events_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long), n)
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long), n)
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long), n)
+    integer(c_long), intent(inout) :: nlog(n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(wheel_spinup_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = wheel_spinup_radau5_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), &
+            c_loc(stats_out(i)))
+      else
+        code = wheel_spinup_radau5_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function wheel_spinup_radau5_events_batch
 
   ! The normalized Taylor coefficients of x and of the rhs's 53
   ! nodes to the given order (16 of them convolutions).
@@ -5162,6 +7884,839 @@ contains
     end do
   end function taylor_grid
 
+  ! Taylor series (Jorba & Zou, Experiment. Math. 14 (2005); the order and step
+  ! size of heyoka's taylor_adaptive): the normalized Taylor coefficients of
+  ! every state by the automatic-differentiation recurrences over the scene's
+  ! own expression DAG, order p = ceil(-ln(rtol)/2 + 1), the step from the
+  ! last two coefficients of each group of states, each by its own scale,
+  ! the new state by Horner's scheme.
+  ! The output grid: one integration from times[0] to times[ntimes - 1], the
+  ! steps
+  ! not cut at the grid times; out[g] is the state at times[g], from the
+  ! accepted
+  ! step's interpolant, or its end state where a step ends on times[g] (the last
+  ! one: x at t1, bit for bit _integrate's). A failure leaves the rows past the
+  ! time reached unwritten; a bad grid (ERR_GRID) writes none.
+  function taylor_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+          log_k, log_x, nlog, stats) result(res)
+    integer(c_long), intent(in) :: ntimes
+    real(c_double), intent(in) :: rtol
+    real(c_double), intent(in) :: atol
+    real(c_double), intent(in) :: h0
+    integer(c_long), intent(in) :: max_steps
+    integer(c_long), intent(in) :: capacity
+    integer(c_long), intent(out) :: nlog
+    type(wheel_spinup_stats), intent(inout) :: stats
+    real(c_double), intent(in) :: times(0:ntimes - 1)
+    real(c_double), intent(inout) :: x(0:nx - 1)
+    real(c_double), intent(in) :: c(0:nc - 1)
+    real(c_double), intent(inout) :: out(0:nx - 1, 0:ntimes - 1)
+    real(c_double), intent(out) :: log_t(0:capacity - 1)
+    integer(c_int), intent(out) :: log_k(0:capacity - 1)
+    real(c_double), intent(out) :: log_x(0:nx - 1, 0:capacity - 1)
+    integer(c_int) :: res
+    real(c_double) :: tay(0:20, 0:20)
+    real(c_double), parameter :: inv(0:20) = [0.0_c_double, 1.0_c_double, 0.5_c_double, &
+        0.3333333333333333_c_double, 0.25_c_double, 0.2_c_double, 0.16666666666666666_c_double, &
+        0.14285714285714285_c_double, 0.125_c_double, 0.1111111111111111_c_double, 0.1_c_double, &
+        0.09090909090909091_c_double, 0.08333333333333333_c_double, 0.07692307692307693_c_double, &
+        0.07142857142857142_c_double, 0.06666666666666667_c_double, 0.0625_c_double, &
+        0.058823529411764705_c_double, 0.05555555555555555_c_double, &
+        0.05263157894736842_c_double, 0.05_c_double]
+    real(c_double), parameter :: rhofacs(0:20) = [0.0_c_double, 0.0_c_double, &
+        0.06720551273974977_c_double, 0.09536916221554963_c_double, 0.10717059875230675_c_double, &
+        0.11360815367076375_c_double, 0.11765484302177921_c_double, 0.12043240152376272_c_double, &
+        0.12245642825298193_c_double, 0.12399674050160123_c_double, 0.12520814359063986_c_double, &
+        0.12618578170503877_c_double, 0.12699134256376904_c_double, 0.12766657029576653_c_double, &
+        0.12824072030490302_c_double, 0.12873490358780423_c_double, 0.1291647359223283_c_double, &
+        0.12954201633524534_c_double, 0.12987582587444038_c_double, 0.13017326751821864_c_double, &
+        0.130439976885755_c_double]
+    real(c_double) :: f0(0:nx - 1)
+    real(c_double) :: xnew(0:nx - 1)
+    real(c_double) :: dx(0:nx - 1)
+    real(c_double) :: comp(0:nx - 1)
+    integer(c_int) :: order
+    real(c_double) :: rhofac
+    real(c_double) :: scale
+    integer(c_int) :: code
+    real(c_double) :: t
+    real(c_double) :: h
+    real(c_double) :: cap
+    logical :: nonfinite
+    logical :: last
+    logical :: run
+    logical :: take
+    logical :: ok
+    logical :: at
+    logical :: jump
+    logical :: retry
+    real(c_double) :: xmax
+    real(c_double) :: dp
+    real(c_double) :: dq
+    real(c_double) :: rp
+    real(c_double) :: rq
+    real(c_double) :: rho
+    real(c_double) :: h2
+    real(c_double) :: acc8
+    real(c_double) :: acc9
+    real(c_double) :: acc10
+    real(c_double) :: acc11
+    real(c_double) :: acc13
+    real(c_double) :: acc14
+    real(c_double) :: acc15
+    real(c_double) :: acc16
+    real(c_double) :: acc17
+    real(c_double) :: acc19
+    real(c_double) :: acc27
+    real(c_double) :: acc33
+    real(c_double) :: acc39
+    real(c_double) :: acc46
+    real(c_double) :: acc52
+    real(c_double) :: acc58
+    real(c_double) :: ib15
+    real(c_double) :: ub15
+    real(c_double) :: v10
+    real(c_double) :: v11
+    real(c_double) :: v12
+    real(c_double) :: v16
+    real(c_double) :: v17
+    real(c_double) :: v18
+    real(c_double) :: v19
+    real(c_double) :: v20
+    real(c_double) :: v21
+    real(c_double) :: v23
+    real(c_double) :: v25
+    real(c_double) :: v27
+    real(c_double) :: v29
+    real(c_double) :: v31
+    real(c_double) :: v33
+    real(c_double) :: v34
+    real(c_double) :: v39
+    real(c_double) :: v40
+    real(c_double) :: v41
+    real(c_double) :: v42
+    real(c_double) :: v44
+    real(c_double) :: v46
+    real(c_double) :: v47
+    real(c_double) :: v48
+    real(c_double) :: v50
+    real(c_double) :: v52
+    real(c_double) :: v54
+    real(c_double) :: v55
+    real(c_double) :: v56
+    real(c_double) :: v58
+    real(c_double) :: v59
+    real(c_double) :: acc(0:nx - 1)
+    real(c_double) :: t0
+    real(c_double) :: t1
+    integer(c_long) :: g
+    real(c_double) :: told
+    real(c_double) :: frac
+    integer(c_int), parameter :: ev_dir(0:0) = [1]
+    integer(c_int), parameter :: ev_term(0:0) = [0]
+    real(c_double) :: ev_old(0:0)
+    real(c_double) :: ev_new(0:0)
+    real(c_double) :: ev_end(0:0)
+    real(c_double) :: ev_g(0:0)
+    real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_y(0:nx - 1)
+    real(c_double) :: ev_a
+    real(c_double) :: ev_b
+    real(c_double) :: ev_ga
+    real(c_double) :: ev_gb
+    real(c_double) :: ev_m
+    real(c_double) :: ev_gm
+    real(c_double) :: ev_f
+    real(c_double) :: ev_gf
+    real(c_double) :: ev_stop
+    real(c_double) :: ev_ta
+    real(c_double) :: ev_tb
+    integer(c_int) :: ev_side
+    integer(c_int) :: ev_best
+    integer(c_int) :: ev_halt
+    integer(c_int) :: ev_it
+    integer(c_int) :: ev_j
+    integer(c_int) :: ev_need
+    integer(c_int) :: ev_k
+    integer(c_int) :: i
+    integer(c_int) :: j
+    integer(c_int) :: n
+    integer(c_int) :: q
+
+    if (.not. grid_ok(ntimes, times)) then
+      call stats_start(stats, ieee_value(1.0_c_double, ieee_quiet_nan))
+      res = WHEEL_SPINUP_ODE_ERR_GRID
+      return
+    end if
+    t0 = times(0)
+    t1 = times(ntimes - 1)
+    g = 0
+    nlog = 0
+    code = ode_start(0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL, t0, t1, x, c, rtol, atol, h0, &
+        max_steps, f0, h, stats)
+    if (code <= WHEEL_SPINUP_ODE_OK) then
+      do i = 0, nx - 1
+        out(i, 0) = x(i)
+      end do
+      g = 1
+      call wheel_spinup_events(t0, x, c, ev_old)
+    end if
+    if (code >= 0) then
+      res = code
+      return
+    end if
+
+    ! the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol
+    order = 2
+    order = order + (merge(1, 0, 0.1353352832366127_c_double > rtol))
+    order = order + (merge(1, 0, 0.01831563888873418_c_double > rtol))
+    order = order + (merge(1, 0, 0.0024787521766663585_c_double > rtol))
+    order = order + (merge(1, 0, 0.00033546262790251185_c_double > rtol))
+    order = order + (merge(1, 0, 4.5399929762484854e-05_c_double > rtol))
+    order = order + (merge(1, 0, 6.14421235332821e-06_c_double > rtol))
+    order = order + (merge(1, 0, 8.315287191035679e-07_c_double > rtol))
+    order = order + (merge(1, 0, 1.1253517471925912e-07_c_double > rtol))
+    order = order + (merge(1, 0, 1.522997974471263e-08_c_double > rtol))
+    order = order + (merge(1, 0, 2.061153622438558e-09_c_double > rtol))
+    order = order + (merge(1, 0, 2.7894680928689246e-10_c_double > rtol))
+    order = order + (merge(1, 0, 3.775134544279098e-11_c_double > rtol))
+    order = order + (merge(1, 0, 5.109089028063325e-12_c_double > rtol))
+    order = order + (merge(1, 0, 6.914400106940203e-13_c_double > rtol))
+    order = order + (merge(1, 0, 9.357622968840175e-14_c_double > rtol))
+    order = order + (merge(1, 0, 1.2664165549094176e-14_c_double > rtol))
+    order = order + (merge(1, 0, 1.713908431542013e-15_c_double > rtol))
+    order = order + (merge(1, 0, 2.3195228302435696e-16_c_double > rtol))
+    rhofac = rhofacs(order)
+    scale = atol / rtol
+    code = -1
+    t = t0
+    nonfinite = .false.
+    do i = 0, nx - 1
+      comp(i) = 0.0_c_double
+    end do
+    cap = merge(h, huge(1.0_c_double), h0 > 0.0_c_double)
+    do
+
+      ! the coefficients at x, and the step they allow (Jorba and Zou)
+      run = code < 0
+      ! orders 0 and 1 of the state and of every node
+      tay(0, 0) = x(0)
+      tay(1, 0) = x(1)
+      tay(2, 0) = x(2)
+      tay(3, 0) = x(3)
+      tay(4, 0) = x(4)
+      tay(5, 0) = x(5)
+      tay(6, 0) = x(6)
+      tay(7, 0) = x(7)
+      tay(8, 0) = wheel_spinup_sin(tay(2, 0))
+      tay(9, 0) = wheel_spinup_cos(tay(2, 0))
+      v10 = tay(9, 0) * tay(6, 0)
+      v11 = tay(8, 0) * tay(4, 0)
+      v12 = v10 - v11
+      tay(10, 0) = wheel_spinup_sin(tay(1, 0))
+      tay(11, 0) = wheel_spinup_cos(tay(1, 0))
+      tay(12, 0) = v12 / tay(11, 0)
+      v16 = tay(8, 0) * tay(6, 0)
+      v17 = tay(9, 0) * tay(4, 0)
+      v18 = v16 + v17
+      v19 = tay(12, 0) * tay(10, 0)
+      v20 = tay(5, 0) - v19
+      v21 = tay(7, 0) - tay(5, 0)
+      v23 = 0.3499793829482495_c_double * tay(6, 0)
+      v25 = 0.014646230145692387_c_double * tay(4, 0)
+      tay(13, 0) = v23 - v25
+      v27 = tay(5, 0) * tay(13, 0)
+      v29 = 1.6873537034207817e-05_c_double * tay(4, 0)
+      v31 = 0.0007488716786310489_c_double * tay(6, 0)
+      tay(14, 0) = v29 + v31
+      v33 = tay(7, 0) * tay(14, 0)
+      v34 = v27 + v33
+      tay(15, 0) = 1.0_c_double * c(0)
+      v39 = tay(6, 0) * tay(6, 0)
+      v40 = 0.01627906976744186_c_double * v39
+      v41 = tay(15, 0) - v40
+      v42 = 0.01627906976744186_c_double * tay(4, 0)
+      v44 = 0.06976744186046512_c_double * tay(6, 0)
+      tay(16, 0) = v42 - v44
+      v46 = tay(4, 0) * tay(16, 0)
+      v47 = v41 + v46
+      v48 = 0.014646230145692387_c_double * tay(6, 0)
+      v50 = 0.2872098251809964_c_double * tay(4, 0)
+      tay(17, 0) = v48 - v50
+      v52 = tay(5, 0) * tay(17, 0)
+      v54 = 0.0008211868373490824_c_double * tay(4, 0)
+      v55 = -v54
+      v56 = 1.6873537034207817e-05_c_double * tay(6, 0)
+      tay(18, 0) = v55 - v56
+      v58 = tay(7, 0) * tay(18, 0)
+      v59 = v52 + v58
+      ib15 = 1.0_c_double / tay(11, 0)
+      ub15 = tay(12, 0) / tay(11, 0)
+      tay(0, 1) = tay(12, 0)
+      tay(1, 1) = v18
+      tay(19, 1) = tay(1, 1)
+      tay(2, 1) = v20
+      tay(20, 1) = tay(2, 1)
+      tay(3, 1) = v21
+      tay(4, 1) = v34
+      tay(5, 1) = v47
+      tay(6, 1) = v59
+      tay(7, 1) = c(1)
+      tay(8, 1) = tay(2, 1) * tay(9, 0)
+      tay(9, 1) = -tay(2, 1) * tay(8, 0)
+      v10 = tay(9, 0) * tay(6, 1) + tay(9, 1) * tay(6, 0)
+      v11 = tay(8, 0) * tay(4, 1) + tay(8, 1) * tay(4, 0)
+      v12 = v10 - v11
+      tay(10, 1) = tay(1, 1) * tay(11, 0)
+      tay(11, 1) = -tay(1, 1) * tay(10, 0)
+      tay(12, 1) = v12 * ib15 - tay(11, 1) * ub15
+      v16 = tay(8, 0) * tay(6, 1) + tay(8, 1) * tay(6, 0)
+      v17 = tay(9, 0) * tay(4, 1) + tay(9, 1) * tay(4, 0)
+      v18 = v16 + v17
+      v19 = tay(12, 0) * tay(10, 1) + tay(12, 1) * tay(10, 0)
+      v20 = tay(5, 1) - v19
+      v21 = tay(7, 1) - tay(5, 1)
+      v23 = 0.3499793829482495_c_double * tay(6, 1)
+      v25 = 0.014646230145692387_c_double * tay(4, 1)
+      tay(13, 1) = v23 - v25
+      v27 = tay(5, 0) * tay(13, 1) + tay(5, 1) * tay(13, 0)
+      v29 = 1.6873537034207817e-05_c_double * tay(4, 1)
+      v31 = 0.0007488716786310489_c_double * tay(6, 1)
+      tay(14, 1) = v29 + v31
+      v33 = tay(7, 0) * tay(14, 1) + tay(7, 1) * tay(14, 0)
+      v34 = v27 + v33
+      v39 = tay(6, 0) * tay(6, 1) + tay(6, 1) * tay(6, 0)
+      v40 = 0.01627906976744186_c_double * v39
+      v41 = -v40
+      v42 = 0.01627906976744186_c_double * tay(4, 1)
+      v44 = 0.06976744186046512_c_double * tay(6, 1)
+      tay(16, 1) = v42 - v44
+      v46 = tay(4, 0) * tay(16, 1) + tay(4, 1) * tay(16, 0)
+      v47 = v41 + v46
+      v48 = 0.014646230145692387_c_double * tay(6, 1)
+      v50 = 0.2872098251809964_c_double * tay(4, 1)
+      tay(17, 1) = v48 - v50
+      v52 = tay(5, 0) * tay(17, 1) + tay(5, 1) * tay(17, 0)
+      v54 = 0.0008211868373490824_c_double * tay(4, 1)
+      v55 = -v54
+      v56 = 1.6873537034207817e-05_c_double * tay(6, 1)
+      tay(18, 1) = v55 - v56
+      v58 = tay(7, 0) * tay(18, 1) + tay(7, 1) * tay(18, 0)
+      v59 = v52 + v58
+      tay(0, 2) = tay(12, 1) * inv(2)
+      tay(1, 2) = v18 * inv(2)
+      tay(19, 2) = v18
+      tay(2, 2) = v20 * inv(2)
+      tay(20, 2) = v20
+      tay(3, 2) = v21 * inv(2)
+      tay(4, 2) = v34 * inv(2)
+      tay(5, 2) = v47 * inv(2)
+      tay(6, 2) = v59 * inv(2)
+      tay(7, 2) = 0.0_c_double
+
+      ! orders 2 .. order-1 of the nodes, so orders 3 .. order of the state
+      do n = 2, order - 1
+        acc33 = tay(7, 1) * tay(14, n - 1)
+        acc58 = tay(7, 1) * tay(18, n - 1)
+        acc8 = 0.0_c_double
+        acc9 = 0.0_c_double
+        acc10 = 0.0_c_double
+        acc11 = 0.0_c_double
+        acc13 = 0.0_c_double
+        acc14 = 0.0_c_double
+        acc15 = 0.0_c_double
+        acc16 = 0.0_c_double
+        acc17 = 0.0_c_double
+        acc19 = 0.0_c_double
+        acc27 = 0.0_c_double
+        acc39 = 0.0_c_double
+        acc46 = 0.0_c_double
+        acc52 = 0.0_c_double
+        do j = 1, n - 1
+          acc8 = acc8 + tay(20, j) * tay(9, n - j)
+          acc9 = acc9 + tay(20, j) * tay(8, n - j)
+          acc10 = acc10 + tay(9, j) * tay(6, n - j)
+          acc11 = acc11 + tay(8, j) * tay(4, n - j)
+          acc13 = acc13 + tay(19, j) * tay(11, n - j)
+          acc14 = acc14 + tay(19, j) * tay(10, n - j)
+          acc15 = acc15 + tay(11, j) * tay(12, n - j)
+          acc16 = acc16 + tay(8, j) * tay(6, n - j)
+          acc17 = acc17 + tay(9, j) * tay(4, n - j)
+          acc19 = acc19 + tay(12, j) * tay(10, n - j)
+          acc27 = acc27 + tay(5, j) * tay(13, n - j)
+          acc39 = acc39 + tay(6, j) * tay(6, n - j)
+          acc46 = acc46 + tay(4, j) * tay(16, n - j)
+          acc52 = acc52 + tay(5, j) * tay(17, n - j)
+        end do
+        tay(8, n) = acc8 * inv(n) + tay(2, n) * tay(9, 0)
+        tay(9, n) = (-acc9 * inv(n)) - tay(2, n) * tay(8, 0)
+        v10 = (acc10 + tay(9, 0) * tay(6, n)) + tay(9, n) * tay(6, 0)
+        v11 = (acc11 + tay(8, 0) * tay(4, n)) + tay(8, n) * tay(4, 0)
+        v12 = v10 - v11
+        tay(10, n) = acc13 * inv(n) + tay(1, n) * tay(11, 0)
+        tay(11, n) = (-acc14 * inv(n)) - tay(1, n) * tay(10, 0)
+        tay(12, n) = v12 * ib15 - (acc15 * ib15 + tay(11, n) * ub15)
+        v16 = (acc16 + tay(8, 0) * tay(6, n)) + tay(8, n) * tay(6, 0)
+        v17 = (acc17 + tay(9, 0) * tay(4, n)) + tay(9, n) * tay(4, 0)
+        v18 = v16 + v17
+        v19 = (acc19 + tay(12, 0) * tay(10, n)) + tay(12, n) * tay(10, 0)
+        v20 = tay(5, n) - v19
+        v21 = -tay(5, n)
+        v23 = 0.3499793829482495_c_double * tay(6, n)
+        v25 = 0.014646230145692387_c_double * tay(4, n)
+        tay(13, n) = v23 - v25
+        v27 = (acc27 + tay(5, 0) * tay(13, n)) + tay(5, n) * tay(13, 0)
+        v29 = 1.6873537034207817e-05_c_double * tay(4, n)
+        v31 = 0.0007488716786310489_c_double * tay(6, n)
+        tay(14, n) = v29 + v31
+        v33 = acc33 + tay(7, 0) * tay(14, n)
+        v34 = v27 + v33
+        v39 = (acc39 + tay(6, 0) * tay(6, n)) + tay(6, n) * tay(6, 0)
+        v40 = 0.01627906976744186_c_double * v39
+        v41 = -v40
+        v42 = 0.01627906976744186_c_double * tay(4, n)
+        v44 = 0.06976744186046512_c_double * tay(6, n)
+        tay(16, n) = v42 - v44
+        v46 = (acc46 + tay(4, 0) * tay(16, n)) + tay(4, n) * tay(16, 0)
+        v47 = v41 + v46
+        v48 = 0.014646230145692387_c_double * tay(6, n)
+        v50 = 0.2872098251809964_c_double * tay(4, n)
+        tay(17, n) = v48 - v50
+        v52 = (acc52 + tay(5, 0) * tay(17, n)) + tay(5, n) * tay(17, 0)
+        v54 = 0.0008211868373490824_c_double * tay(4, n)
+        v55 = -v54
+        v56 = 1.6873537034207817e-05_c_double * tay(6, n)
+        tay(18, n) = v55 - v56
+        v58 = acc58 + tay(7, 0) * tay(18, n)
+        v59 = v52 + v58
+        tay(0, n + 1) = tay(12, n) * inv(n + 1)
+        tay(1, n + 1) = v18 * inv(n + 1)
+        tay(19, n + 1) = v18
+        tay(2, n + 1) = v20 * inv(n + 1)
+        tay(20, n + 1) = v20
+        tay(3, n + 1) = v21 * inv(n + 1)
+        tay(4, n + 1) = v34 * inv(n + 1)
+        tay(5, n + 1) = v47 * inv(n + 1)
+        tay(6, n + 1) = v59 * inv(n + 1)
+      end do
+      stats%rhs_calls = stats%rhs_calls + (merge(1, 0, run))
+      rp = huge(1.0_c_double)
+      rq = huge(1.0_c_double)
+
+      ! the bound the attitude set
+      xmax = 0.0_c_double
+      do i = 0, 3 - 1
+        xmax = merge(merge(3.141592653589793_c_double, abs(x(i)), &
+            abs(x(i)) > 3.141592653589793_c_double), xmax, (merge(3.141592653589793_c_double, &
+            abs(x(i)), abs(x(i)) > 3.141592653589793_c_double)) > xmax)
+      end do
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 0, 3 - 1
+        dp = merge(abs(tay(i, order)), dp, abs(tay(i, order)) > dp)
+        dq = merge(abs(tay(i, order - 1)), dq, abs(tay(i, order - 1)) > dq)
+      end do
+      xmax = max(scale, xmax)  ! the absolute and relative modes in one
+      rp = merge(xmax / dp, rp, xmax / dp < rp)
+      rq = merge(xmax / dq, rq, xmax / dq < rq)
+
+      ! the bound the rotor angles set
+      xmax = 0.0_c_double
+      do i = 3, 4 - 1
+        xmax = merge(merge(3.141592653589793_c_double, abs(x(i)), &
+            abs(x(i)) > 3.141592653589793_c_double), xmax, (merge(3.141592653589793_c_double, &
+            abs(x(i)), abs(x(i)) > 3.141592653589793_c_double)) > xmax)
+      end do
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 3, 4 - 1
+        dp = merge(abs(tay(i, order)), dp, abs(tay(i, order)) > dp)
+        dq = merge(abs(tay(i, order - 1)), dq, abs(tay(i, order - 1)) > dq)
+      end do
+      xmax = max(scale, xmax)  ! the absolute and relative modes in one
+      rp = merge(xmax / dp, rp, xmax / dp < rp)
+      rq = merge(xmax / dq, rq, xmax / dq < rq)
+
+      ! the bound the carrier rates set
+      xmax = 0.0_c_double
+      do i = 4, 7 - 1
+        xmax = merge(abs(x(i)), xmax, abs(x(i)) > xmax)
+      end do
+      dp = 0.0_c_double
+      dq = 0.0_c_double
+      do i = 4, 7 - 1
+        dp = merge(abs(tay(i, order)), dp, abs(tay(i, order)) > dp)
+        dq = merge(abs(tay(i, order - 1)), dq, abs(tay(i, order - 1)) > dq)
+      end do
+      xmax = max(scale, xmax)  ! the absolute and relative modes in one
+      rp = merge(xmax / dp, rp, xmax / dp < rp)
+      rq = merge(xmax / dq, rq, xmax / dq < rq)
+      rho = step_exp2(min(step_log2(rp) * inv(order), step_log2(rq) * inv(order - 1)))
+      h = min(min(rho * rhofac, t1 - t), cap)
+      last = t + 1.01_c_double * h >= t1
+      h = merge(t1 - t, h, last)
+      told = t
+      stats%h = merge(h, stats%h, run)
+      code = merge(merge(merge(WHEEL_SPINUP_ODE_ERR_NONFINITE, &
+          WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW, nonfinite), merge(WHEEL_SPINUP_ODE_ERR_MAX_STEPS, &
+          -1, stats%accepted + stats%rejected >= max_steps), step_underflow(h, t)), code, run)  ! lost in t, or no steps left
+      run = code < 0
+
+      ! x(t + h) by Horner's scheme two orders a turn, less what the last add lost
+      h2 = h * h
+      do i = 0, 7 - 1
+        xnew(i) = tay(i, order)
+      end do
+      do q = 0, (order - 1) / 2 - 1
+        do i = 0, 7 - 1
+          xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
+        end do
+      end do
+      do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
+        do i = 0, 7 - 1
+          xnew(i) = tay(i, 1) + h * xnew(i)
+        end do
+      end do
+      xnew(7) = tay(7, 1)
+      do i = 0, nx - 1
+        dx(i) = h * xnew(i) - comp(i)
+        xnew(i) = x(i) + dx(i)
+      end do
+      nonfinite = .false.
+      do i = 0, nx - 1
+        nonfinite = nonfinite .or. .not. ieee_is_finite(xnew(i))
+      end do
+
+      ! accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock
+      take = run .and. .not. nonfinite
+      at = merge(abs(wheel_spinup_cos(xnew(1))) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS, .false., &
+          (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - gimbal_interval(xnew(1)) < &
+          1e-6_c_double .or. (xnew(1) * 0.3183098861837907_c_double + 0.5_c_double) - &
+          gimbal_interval(xnew(1)) > 0.999999_c_double .or. .not. (abs(xnew(1)) < &
+          1000000.0_c_double))
+      jump = abs(gimbal_interval(x(1)) - gimbal_interval(xnew(1))) >= 1.0_c_double
+      ok = take .and. .not. at .and. .not. jump
+      retry = run .and. (nonfinite .or. jump)  ! past gimbal lock, or not finite
+      code = merge(WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR, merge(WHEEL_SPINUP_ODE_OK, code, &
+          ok .and. last), take .and. at .and. .not. jump)
+      t = merge(merge(t1, t + h, last), t, ok)
+      stats%t = t
+      stats%accepted = stats%accepted + (merge(1, 0, ok))
+      stats%rejected = stats%rejected + (merge(1, 0, retry))
+      cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
+      if (ok) then
+        call wheel_spinup_events(t, xnew, c, ev_end)
+        ev_need = merge(1, 0, g < ntimes .and. times(g) < t)
+        do ev_k = 0, 1 - 1
+          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
+              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k)))) then
+            ev_need = 1
+          end if
+        end do
+        if (ev_need /= 0) then
+        end if
+        ev_stop = t
+        ev_halt = -1
+        ev_ta = told
+        ev_j = 0
+        do
+          if (ev_j >= 1) then
+            exit
+          end if
+          ev_j = ev_j + 1
+          if (ev_j < 1) then
+            ev_tb = told + (t - told) * (real(ev_j, c_double) / 1.0_c_double)
+            do i = 0, 7 - 1
+              acc(i) = tay(i, order)
+            end do
+            do q = 0, order - 1 - 1
+              do i = 0, 7 - 1
+                acc(i) = tay(i, (order - 1) - q) + (ev_tb - told) * acc(i)
+              end do
+            end do
+            do i = 0, 7 - 1
+              ev_y(i) = x(i) + (ev_tb - told) * acc(i)
+            end do
+            ev_y(7) = x(7) + (ev_tb - told) * tay(7, 1)
+            call wheel_spinup_events(ev_tb, ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_g(ev_k)
+            end do
+          else
+            ev_tb = t
+            do ev_k = 0, 1 - 1
+              ev_new(ev_k) = ev_end(ev_k)
+            end do
+          end if
+          do ev_k = 0, 1 - 1
+            ev_t(ev_k) = huge(1.0_c_double)
+            if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) >= &
+                0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                ev_new(ev_k) <= 0.0_c_double)) then
+              ev_a = ev_ta
+              ev_b = ev_tb
+              ev_ga = ev_old(ev_k)
+              ev_gb = ev_new(ev_k)
+              ev_side = 0
+              ev_it = 0
+              do
+                if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                  exit
+                end if
+                ev_it = ev_it + 1
+                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  exit
+                end if
+                do i = 0, 7 - 1
+                  acc(i) = tay(i, order)
+                end do
+                do q = 0, order - 1 - 1
+                  do i = 0, 7 - 1
+                    acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
+                  end do
+                end do
+                do i = 0, 7 - 1
+                  ev_y(i) = x(i) + (ev_m - told) * acc(i)
+                end do
+                ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
+                call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                ev_gm = ev_g(ev_k)
+                if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                    0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                  ev_a = ev_m
+                  ev_ga = ev_gm
+                  if (ev_side == -1) then
+                    ev_gb = 0.5_c_double * ev_gb
+                  end if
+                  ev_side = -1
+                else
+                  ev_b = ev_m
+                  ev_gb = ev_gm
+                  if (ev_side == 1) then
+                    ev_ga = 0.5_c_double * ev_ga
+                  end if
+                  ev_side = 1
+                end if
+              end do
+              ev_t(ev_k) = ev_b
+            else
+              if (ieee_is_finite(ev_old(ev_k)) .and. .not. ieee_is_finite(ev_new(ev_k))) then
+                ev_f = ev_ta
+                ev_gf = ev_old(ev_k)
+                ev_b = ev_tb
+                ev_it = 0
+                do
+                  if (ev_it >= 200) then
+                    exit
+                  end if
+                  ev_it = ev_it + 1
+                  ev_m = ev_f + 0.5_c_double * (ev_b - ev_f)
+                  if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
+                    exit
+                  end if
+                  do i = 0, 7 - 1
+                    acc(i) = tay(i, order)
+                  end do
+                  do q = 0, order - 1 - 1
+                    do i = 0, 7 - 1
+                      acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
+                    end do
+                  end do
+                  do i = 0, 7 - 1
+                    ev_y(i) = x(i) + (ev_m - told) * acc(i)
+                  end do
+                  ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
+                  call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                  if (ieee_is_finite(ev_g(ev_k))) then
+                    ev_f = ev_m
+                    ev_gf = ev_g(ev_k)
+                  else
+                    ev_b = ev_m
+                  end if
+                end do
+                if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_gf >= &
+                    0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+                    ev_gf <= 0.0_c_double)) then
+                  ev_a = ev_ta
+                  ev_b = ev_f
+                  ev_ga = ev_old(ev_k)
+                  ev_gb = ev_gf
+                  ev_side = 0
+                  ev_it = 0
+                  do
+                    if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      exit
+                    end if
+                    do i = 0, 7 - 1
+                      acc(i) = tay(i, order)
+                    end do
+                    do q = 0, order - 1 - 1
+                      do i = 0, 7 - 1
+                        acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
+                      end do
+                    end do
+                    do i = 0, 7 - 1
+                      ev_y(i) = x(i) + (ev_m - told) * acc(i)
+                    end do
+                    ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    ev_gm = ev_g(ev_k)
+                    if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                        0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                      ev_a = ev_m
+                      ev_ga = ev_gm
+                      if (ev_side == -1) then
+                        ev_gb = 0.5_c_double * ev_gb
+                      end if
+                      ev_side = -1
+                    else
+                      ev_b = ev_m
+                      ev_gb = ev_gm
+                      if (ev_side == 1) then
+                        ev_ga = 0.5_c_double * ev_ga
+                      end if
+                      ev_side = 1
+                    end if
+                  end do
+                  ev_t(ev_k) = ev_b
+                end if
+              end if
+            end if
+          end do
+          do
+            ev_best = -1
+            do ev_k = 0, 1 - 1
+              if (ev_t(ev_k) < huge(1.0_c_double) .and. (ev_best < 0 .or. ev_t(ev_k) < &
+                  ev_t(ev_best))) then
+                ev_best = ev_k
+              end if
+            end do
+            if (ev_best < 0) then
+              exit
+            end if
+            if (nlog >= capacity) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL
+              exit
+            end if
+            do i = 0, 7 - 1
+              acc(i) = tay(i, order)
+            end do
+            do q = 0, order - 1 - 1
+              do i = 0, 7 - 1
+                acc(i) = tay(i, (order - 1) - q) + (ev_t(ev_best) - told) * acc(i)
+              end do
+            end do
+            do i = 0, 7 - 1
+              ev_y(i) = x(i) + (ev_t(ev_best) - told) * acc(i)
+            end do
+            ev_y(7) = x(7) + (ev_t(ev_best) - told) * tay(7, 1)
+            log_t(nlog) = ev_t(ev_best)
+            log_k(nlog) = ev_best
+            do i = 0, nx - 1
+              log_x(i, nlog) = ev_y(i)
+            end do
+            nlog = nlog + 1
+            if (ev_term(ev_best) /= 0) then
+              ev_stop = ev_t(ev_best)
+              ev_halt = WHEEL_SPINUP_ODE_EVENT
+              exit
+            end if
+            ev_t(ev_best) = huge(1.0_c_double)
+          end do
+          if (ev_halt >= 0) then
+            exit
+          end if
+          do ev_k = 0, 1 - 1
+            ev_old(ev_k) = ev_new(ev_k)
+          end do
+          ev_ta = ev_tb
+        end do
+        do
+          if (.not. (g < ntimes)) then
+            exit
+          end if
+          if (.not. (times(g) < ev_stop)) then
+            exit
+          end if
+          frac = times(g) - told
+          do i = 0, 7 - 1
+            acc(i) = tay(i, order)
+          end do
+          do q = 0, order - 1 - 1
+            do i = 0, 7 - 1
+              acc(i) = tay(i, (order - 1) - q) + frac * acc(i)
+            end do
+          end do
+          do i = 0, 7 - 1
+            out(i, g) = x(i) + frac * acc(i)
+          end do
+          out(7, g) = x(7) + frac * tay(7, 1)
+          g = g + 1
+        end do
+        if (ev_halt >= 0) then
+          do i = 0, 7 - 1
+            acc(i) = tay(i, order)
+          end do
+          do q = 0, order - 1 - 1
+            do i = 0, 7 - 1
+              acc(i) = tay(i, (order - 1) - q) + (ev_stop - told) * acc(i)
+            end do
+          end do
+          do i = 0, 7 - 1
+            ev_y(i) = x(i) + (ev_stop - told) * acc(i)
+          end do
+          ev_y(7) = x(7) + (ev_stop - told) * tay(7, 1)
+          do i = 0, nx - 1
+            x(i) = ev_y(i)
+          end do
+          t = ev_stop
+          stats%t = t
+          if (g < ntimes) then
+            if (times(g) <= t) then
+              do i = 0, nx - 1
+                out(i, g) = x(i)
+              end do
+              g = g + 1
+            end if
+          end if
+          res = ev_halt
+          return
+        end if
+        do i = 0, nx - 1
+          comp(i) = (xnew(i) - x(i)) - dx(i)
+          x(i) = xnew(i)
+        end do
+        if (g < ntimes) then
+          if (times(g) <= t) then
+            do i = 0, nx - 1
+              out(i, g) = x(i)
+            end do
+            g = g + 1
+          end if
+        end if
+      end if
+      if (code >= 0) then
+        res = code
+        return
+      end if
+    end do
+  end function taylor_events
+
   ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
   function wheel_spinup_taylor(t0, t1, x, c, rtol, atol, h0, max_steps, stats_ptr) result(code) &
       bind(C, name="wheel_spinup_f_taylor")
@@ -5200,6 +8755,32 @@ contains
     code = taylor_grid(ntimes, times, x, c, rtol, atol, h0, max_steps, out, stats)
   end function wheel_spinup_taylor_grid
 
+  ! Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
+  ! Over an output grid, with the scene's events located (see wheel_spinup_ode.h).
+  function wheel_spinup_taylor_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
+      capacity, log_t, log_k, log_x, nlog, stats_ptr) result(code) &
+      bind(C, name="wheel_spinup_f_taylor_events")
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long))
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long))
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long))
+    integer(c_long), intent(out) :: nlog
+    type(c_ptr), value, intent(in) :: stats_ptr  ! a wheel_spinup_stats, or NULL
+    integer(c_int) :: code
+    type(wheel_spinup_stats), pointer :: stats
+    type(wheel_spinup_stats), target :: own
+
+    stats => own  ! when stats_ptr is NULL: not wanted
+    if (c_associated(stats_ptr)) call c_f_pointer(stats_ptr, stats)
+    code = taylor_events(ntimes, times, x, c, rtol, atol, h0, max_steps, out, capacity, log_t, &
+        log_k, log_x, nlog, stats)
+  end function wheel_spinup_taylor_events
+
   ! stats, codes: NULL when not wanted.
   function wheel_spinup_taylor_grid_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, out, &
       stats, codes) result(failed) &
@@ -5237,6 +8818,49 @@ contains
     end do
     !$omp end parallel do
   end function wheel_spinup_taylor_grid_batch
+
+  ! stats, codes: NULL when not wanted.
+  function wheel_spinup_taylor_events_batch(n, ntimes, times, x, c, rtol, atol, h0, max_steps, &
+      out, capacity, log_t, log_k, log_x, nlog, stats, codes) result(failed) &
+      bind(C, name="wheel_spinup_f_taylor_events_batch")
+    integer(c_size_t), value, intent(in) :: n
+    integer(c_long), value, intent(in) :: ntimes, max_steps, capacity
+    real(c_double), value, intent(in) :: rtol, atol, h0
+    real(c_double), intent(in) :: times(max(ntimes, 1_c_long))
+    real(c_double), intent(inout) :: x(nx, n)
+    real(c_double), intent(in) :: c(nc)
+    real(c_double), intent(inout) :: out(nx, max(ntimes, 1_c_long), n)
+    real(c_double), intent(inout) :: log_t(max(capacity, 1_c_long), n)
+    integer(c_int), intent(inout) :: log_k(max(capacity, 1_c_long), n)
+    real(c_double), intent(inout) :: log_x(nx, max(capacity, 1_c_long), n)
+    integer(c_long), intent(inout) :: nlog(n)
+    type(c_ptr), value, intent(in) :: stats, codes
+    integer(c_size_t) :: failed
+    type(wheel_spinup_stats), pointer :: stats_out(:)
+    integer(c_int), pointer :: codes_out(:)
+    integer(c_size_t) :: i
+    integer(c_int) :: code
+
+    nullify (stats_out, codes_out)
+    if (c_associated(stats)) call c_f_pointer(stats, stats_out, [n])
+    if (c_associated(codes)) call c_f_pointer(codes, codes_out, [n])
+    failed = 0
+    ! Every core under OpenMP (-fopenmp), one trajectory at a time on each.
+    !$omp parallel do schedule(dynamic, 1) private(code) reduction(+:failed)
+    do i = 1, n
+      if (associated(stats_out)) then
+        code = wheel_spinup_taylor_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), &
+            c_loc(stats_out(i)))
+      else
+        code = wheel_spinup_taylor_events(ntimes, times, x(:, i), c, rtol, atol, h0, max_steps, &
+            out(:, :, i), capacity, log_t(:, i), log_k(:, i), log_x(:, :, i), nlog(i), c_null_ptr)
+      end if
+      if (associated(codes_out)) codes_out(i) = code
+      if (code /= WHEEL_SPINUP_ODE_OK) failed = failed + 1
+    end do
+    !$omp end parallel do
+  end function wheel_spinup_taylor_events_batch
 
   ! stats, codes: NULL when not wanted.
   function wheel_spinup_rk4_batch(n, t0, t1, steps, x, c, stats, codes) result(failed) &

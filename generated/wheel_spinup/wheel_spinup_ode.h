@@ -5,7 +5,7 @@
  * template c/ode.h.jinja. Do not edit: change the template or the
  * generator and run `gyrogen generate` (or `make generate`).
  *
- * Build id 12205a99de73d91a: a hash of the scene, gyrogen and sympy
+ * Build id f74296a5d112754d: a hash of the scene, gyrogen and sympy
  * versions (also in manifest.json and as WHEEL_SPINUP_BUILD_ID).
  *
  * Operation counts (sympy.count_ops, temporaries included):
@@ -41,6 +41,21 @@ extern "C" {
  * written; a bad grid returns WHEEL_SPINUP_ODE_ERR_GRID and writes nothing. The
  * _grid_batch variants run n states over the same times
  * (out[(i*ntimes + g)*WHEEL_SPINUP_NX + j]).
+ * The _events variants are the _grid ones with the scene's events located
+ * (wheel_spinup_events in wheel_spinup.h):
+ * g is evaluated at each accepted step's end (the events read the states
+ * alone), an event whose g changed sign over the step as its direction asks
+ * is located on the interpolant by the Illinois method until no double lies
+ * between the bracket's ends, and the crossings are logged in time order:
+ * log_t[e], log_k[e] (the event, from 0) and log_x[e*WHEEL_SPINUP_NX + j], *nlog of
+ * them. A terminal event stops the run there (WHEEL_SPINUP_ODE_EVENT: x and
+ * stats.t at the event, grid rows past it not written); a crossing past
+ * capacity logged ones stops it as well (WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL). A g of 0
+ * at times[0] is no crossing; two sign changes of one g within one
+ * step cancel, unseen; a NaN g never crosses. The _events_batch variants run n
+ * states over the same times, each with a log of capacity entries of its own
+ * (log_t[i*capacity + e], log_k likewise, log_x[(i*capacity + e)*WHEEL_SPINUP_NX + j],
+ * nlog[i]).
  * No allocation, no globals: the work arrays live on the stack, and the
  * functions are re-entrant. Each method's coefficients and their published
  * source are above its code in wheel_spinup_ode.c.
@@ -146,6 +161,14 @@ int wheel_spinup_dopri5_grid(long ntimes, const double *times, double *x, const 
 size_t wheel_spinup_dopri5_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_dopri5_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_dopri5_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 
 /* DOP853 (Hairer's coefficients and error estimator), adaptive.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -165,6 +188,14 @@ int wheel_spinup_dop853_grid(long ntimes, const double *times, double *x, const 
 size_t wheel_spinup_dop853_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_dop853_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_dop853_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 
 /* Rodas4, a stiffly accurate Rosenbrock method using the analytic Jacobian.
  * Each component's error is scaled by atol + rtol max(|x_i|, |xnew_i|); a step
@@ -184,6 +215,14 @@ int wheel_spinup_rodas4_grid(long ntimes, const double *times, double *x, const 
 size_t wheel_spinup_rodas4_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_rodas4_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_rodas4_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
  * Each component's error is scaled by atol' + rtol' |x_i| with Hairer's
@@ -205,6 +244,14 @@ int wheel_spinup_radau5_grid(long ntimes, const double *times, double *x, const 
 size_t wheel_spinup_radau5_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_radau5_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_radau5_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 
 /* Taylor series of variable order from the tolerance (Jorba-Zou), adaptive; for smooth scenes.
  * The order p = ceil(-ln(rtol)/2 + 1) (2 to 20); each step's size from the
@@ -224,6 +271,14 @@ int wheel_spinup_taylor_grid(long ntimes, const double *times, double *x, const 
 size_t wheel_spinup_taylor_grid_batch(size_t n, long ntimes, const double *times,
         double *x, const double *c, double rtol, double atol, double h0, long max_steps,
         double *out, wheel_spinup_stats *stats, int *codes);
+int wheel_spinup_taylor_events(long ntimes, const double *times, double *x,
+        const double *c, double rtol, double atol, double h0, long max_steps, double *out,
+        long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats);
+size_t wheel_spinup_taylor_events_batch(size_t n, long ntimes, const double *times,
+        double *x, const double *c, double rtol, double atol, double h0, long max_steps,
+        double *out, long capacity, double *log_t, int *log_k, double *log_x, long *nlog,
+        wheel_spinup_stats *stats, int *codes);
 
 #ifdef __cplusplus
 }

@@ -11,9 +11,10 @@ templates read them through the render context (codegen.context).
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass, replace
 
-from gyrogen.abi_rotors import AXIS_NORM_SLACK, GIMBAL_PERP_SLACK, ROTOR_KEYS
+from gyrogen.abi_rotors import AXIS_NORM_SLACK, GIMBAL_PERP_SLACK, ON_GIMBAL, ROTOR_KEYS
 
 STATES: tuple[str, ...] = tuple(f"q{i}" for i in range(1, 8)) + tuple(f"u{i}" for i in range(1, 8))
 """q1..q3: 3-1-2 Euler angles of the carrier A in N; q4: rotor angle about a2
@@ -77,8 +78,9 @@ UNITS: dict[str, tuple[str, str]] = {
 """Every parameter's and state's unit and meaning, as the headers document them."""
 
 
-def unit_and_doc(name: str) -> tuple[str, str]:
-    """A state's or parameter's unit and meaning: UNITS, or a cluster's derived name."""
+def unit_and_doc(name: str, gimbals: Collection[int] = ()) -> tuple[str, str]:
+    """A state's or parameter's unit and meaning: UNITS, or a cluster's derived
+    name (gimbals: the k of the rotors on gimbals, whose keys ON_GIMBAL reads)."""
     if name in UNITS:
         return UNITS[name]
     if name.startswith("th") and name[2:].isdigit():
@@ -90,7 +92,9 @@ def unit_and_doc(name: str) -> tuple[str, str]:
     if name.startswith("w") and name[1:].isdigit():
         return ("rad/s", f"absolute angular velocity of rotor B{name[1:]}, along g{name[1:]}")
     key, _, k = name.rpartition("_")
-    unit, doc = ROTOR_KEYS[key]
+    unit, doc = (
+        ON_GIMBAL if key in ON_GIMBAL and k.isdigit() and int(k) in gimbals else ROTOR_KEYS
+    )[key]
     return unit, doc.format(k=k)
 
 

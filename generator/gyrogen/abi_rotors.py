@@ -38,6 +38,19 @@ ROTOR_KEYS: dict[str, tuple[str, str]] = {
     },
 }
 """A rotor's scalar keys; in p[] and in the code the key of rotor k is <key>_<k>."""
+ON_GIMBAL: dict[str, tuple[str, str]] = {
+    "T": ("N m", "motor torque on rotor B{k} about its spin axis g{k} (minus on gimbal G{k})"),
+    **{
+        f"g{i}": (
+            "-",
+            f"spin axis g_s0 of rotor B{{k}} at gimbal angle 0 (g{{k}} turns with gam{{k}}), "
+            f'a{i} component (axis = "runtime")',
+        )
+        for i in (1, 2, 3)
+    },
+}
+"""The rotor keys a gimbal gives another meaning: their unit and doc for a
+rotor on a gimbal (ROTOR_KEYS' for the others)."""
 ROTOR_RUNTIME = ("m", "I", "J", "T", "k", "w_ref")
 """The rotor keys that may be "runtime", in a rotor's p[] order (b and
 tau_max are folded; position = "runtime" gives POSITION, then axis =

@@ -91,6 +91,11 @@ TEMPLATES = {
 """Each build file's name and its template."""
 
 
+def names(prefix: str) -> set[str]:
+    """The names of the files of TEMPLATES for a scene of this prefix."""
+    return {pattern.format(prefix=prefix) for pattern in TEMPLATES}
+
+
 def files(manifest: dict[str, Any]) -> dict[str, str]:
     """File name -> text: the files of TEMPLATES, to be written beside the
     generated sources the manifest describes."""

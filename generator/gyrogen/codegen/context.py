@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
 from importlib.metadata import version
@@ -16,15 +17,15 @@ from gyrogen.abi import (
     OUTPUT_DOC,
     Code,
     setup_codes_of,
-    unit_and_doc,
 )
 from gyrogen.abi_groups import StateKind, state_kind
-from gyrogen.abi_rotors import AXIS, GIMBAL_AXIS, rotor_name
+from gyrogen.abi_rotors import AXIS, GIMBAL_AXIS, GIMBAL_KEYS, POSITION, rotor_name
 from gyrogen.codegen.integrators.driver import EV_SUBINTERVALS, Event, Grid
 from gyrogen.codegen.integrators.program import Program, program
 from gyrogen.codegen.integrators.taylor import UNMEASURED, state_scales
 from gyrogen.methods import IMPLICIT, METHODS, Method, needs_jacobian
 from gyrogen.scene import Outputs, Scene
+from gyrogen.scene.rotors import Gimbal, Rotor
 from gyrogen.setup_checks import CHECKS, Check, cluster_checks
 from gyrogen.symbolic.blocks import Blocks, diagonal_blocks
 from gyrogen.symbolic.equations import TIME, Equations
@@ -274,20 +275,18 @@ class SceneContext:
         """A cluster's rotors for the header: axis, position, law, friction, limit."""
         out = []
         for k, r in enumerate(self.scene.rotors, 1):
-            g = (
-                f"p[g1_{k}], p[g2_{k}], p[g3_{k}] normalized"
-                if r.axis == "runtime"
-                else ", ".join(f"{float(x):.6g}" for x in r.unit_axis)
-            )
-            at = (
-                f"p[r1_{k}], p[r2_{k}], p[r3_{k}]"
-                if r.position == "runtime"
-                else ", ".join(f"{x:.6g}" for x in r.position)
-            )
-            out.append(f"Rotor B{k}: axis g{k} = ({g}) in A, B{k}* at ({at}) m from A*;")
+            at = _vector_doc(r.position, POSITION, k)
+            if r.gimbal is None:
+                g = _vector_doc(r.axis if r.axis == "runtime" else r.unit_axis, AXIS, k)
+                g += " normalized" if r.axis == "runtime" else ""
+                out.append(f"Rotor B{k}: axis g{k} = ({g}) in A, B{k}* at ({at}) m from A*;")
+            else:
+                out += _gimbal_axes_doc(r, k, at)
             out.append(f"  {_law_doc(r.law(), r.torque, k)};")
             limit = "" if r.tau_max is None else f", |T| clamped to {r.tau_max:g} N m"
-            out.append(f"  friction b = {r.b:g} N m s{limit}.")
+            out.append(f"  friction b = {r.b:g} N m s{limit}{';' if r.gimbal else '.'}")
+            if r.gimbal is not None:
+                out += _gimbal_law_doc(r.gimbal, k)
         return out
 
     def outputs_size(self, function: str) -> int:
@@ -341,11 +340,11 @@ class SceneContext:
 
     @property
     def state_rows(self) -> list[Row]:
-        return [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.states)]
+        return [Row(i, s.name, *self.scene.unit_and_doc(s.name)) for i, s in enumerate(self.states)]
 
     @property
     def param_rows(self) -> list[Row]:
-        return [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.params)]
+        return [Row(i, s.name, *self.scene.unit_and_doc(s.name)) for i, s in enumerate(self.params)]
 
     @cached_property
     def setup_locals(self) -> list[Local]:
@@ -431,7 +430,9 @@ class VariationalContext(SceneContext):
     @property
     def state_rows(self) -> list[Row]:
         n, var = self.nx_state, self.layout
-        x = [Row(i, s.name, *unit_and_doc(s.name)) for i, s in enumerate(self.states[:n])]
+        x = [
+            Row(i, s.name, *self.scene.unit_and_doc(s.name)) for i, s in enumerate(self.states[:n])
+        ]
         return x + [
             Row(
                 n + r,
@@ -485,6 +486,48 @@ def make_context(scene: Scene) -> SceneContext:
     wrt, error = (var.wrt, var.error) if var is not None else ((), "all")
     jacobian = needs_jacobian(scene.integrators)
     return SceneContext(scene, eqs, optimize(eqs, jacobian, wrt, error))
+
+
+def _vector_doc(v: Sequence[object] | str, keys: tuple[str, str, str], k: int) -> str:
+    """A vector's components in A, or its p[] names (keys of rotor k) when runtime."""
+    if v == "runtime":
+        return ", ".join(f"p[{rotor_name(key, k)}]" for key in keys)
+    return ", ".join(f"{float(x):.6g}" for x in v)  # type: ignore[arg-type]
+
+
+def _gimbal_axes_doc(r: Rotor, k: int, at: str) -> list[str]:
+    """A gimbal rotor's spin axis at gimbal angle 0 and its gimbal axis (as
+    setup makes them when runtime), and its position at."""
+    assert r.gimbal is not None
+    if r.axes_at_runtime:
+        spin = f"({_vector_doc(r.axis, AXIS, k)}) made perpendicular to g_g{k}, normalized"
+        g_g = f"({_vector_doc(r.gimbal.axis, GIMBAL_AXIS, k)}) normalized"
+    else:
+        spin = f"({_vector_doc(r.spin_axis, AXIS, k)})"
+        g_g = f"({_vector_doc(r.gimbal.unit_axis, GIMBAL_AXIS, k)})"
+    return [
+        f"Rotor B{k} on gimbal G{k}: spin axis g{k} = {spin} in A at gimbal angle 0,",
+        f"  turned by gam{k} about the gimbal axis g_g{k} = {g_g} in A",
+        f"  (g{k}(gam{k}) = cos(gam{k}) g{k}(0) + sin(gam{k}) g_g{k} x g{k}(0));",
+        f"  B{k}* at ({at}) m from A*;",
+    ]
+
+
+def _gimbal_law_doc(gimbal: Gimbal, k: int) -> list[str]:
+    """A gimbal's torque law u_g in words, its values or their p[] names, and
+    its clamp (a line of its own)."""
+    v = {key: f"p[{rotor_name(GIMBAL_KEYS[key], k)}]" if val == "runtime" else f"{val:g}"
+         for key, val in gimbal.law().items()}  # fmt: skip
+    law = {
+        "none": "no gimbal torque",
+        "constant": f"gimbal torque u_g = {v.get('T')} N m",
+        "rate_servo": f"rate servo u_g = -k (gd{k} - rate_ref), k = {v.get('k')}, "
+        f"rate_ref = {v.get('rate_ref')}",
+        "table": f"gimbal torque u_g(t), piecewise linear through its table (torqueg_{k})",
+    }[gimbal.torque]
+    if gimbal.tau_max is None:
+        return [f"  gimbal G{k}: {law}."]
+    return [f"  gimbal G{k}: {law},", f"    |u_g| clamped to {gimbal.tau_max:g} N m."]
 
 
 def _law_doc(law: dict[str, float | str], torque: str, k: int) -> str:

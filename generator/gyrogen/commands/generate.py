@@ -61,10 +61,12 @@ def generate(
     sets; on any failure nothing is written and the exit code is 1.
     --no-check skips this. With several scenes, every one is rendered and
     checked before any is written."""
+    from gyrogen.codegen import buildfiles
     from gyrogen.codegen.generate import claim, render_all, unit_of
     from gyrogen.errors import SceneError
     from gyrogen.files import can_write, transaction, write_atomic
     from gyrogen.oracle.compare import check_rendered
+    from gyrogen.runtime.scene_build import keep_sources
 
     chosen = [load(n) for n in builtin_names()] if every else list(scenes) or [default()]
     names = [scene.name for scene in chosen]
@@ -98,6 +100,9 @@ def generate(
     with transaction():  # every scene checked: now written, all or none
         for _, target, _, files in rendered:
             write_atomic(target, files)
+    for scene, _, unit, files in rendered:  # verify and sweeps of them derive nothing again
+        lib_files = buildfiles.names(unit.prefix)
+        keep_sources(scene, unit.build_id, {n: t for n, t in files.items() if n not in lib_files})
     for _, target, _, _ in rendered:
         click.echo(f"wrote {target}/")
     print_table([unit for _, _, unit, _ in rendered])

@@ -14,7 +14,6 @@ from gyrogen.errors import GyrogenError
 from gyrogen.scene import Scene, default
 
 if TYPE_CHECKING:
-    from gyrogen.codegen.context import SceneContext
     from gyrogen.runtime.compiled import Compiled
 
 
@@ -22,19 +21,25 @@ def verify_scene(
     scene: Scene,
     directory: Path,
     counts: tuple[int, int, int],
-    written: Callable[[SceneContext], None] = lambda unit: None,
-) -> tuple[SceneContext, bool]:
-    """Generate the scene into directory (written is told), build every
-    target, compare with the reference at counts (states, parameter sets,
-    seed) and print the table: the unit, and whether everything passed."""
-    from gyrogen.runtime.scene_build import build_scene
+    written: Callable[[], None] = lambda: None,
+) -> tuple[str, bool]:
+    """Write the scene's sources into directory (written is told), build
+    every target, compare with the reference at counts (states, parameter
+    sets, seed) and print the table: the build id, and whether everything
+    passed. The sources are the ones scene_sources renders, or keeps from
+    the last render of this scene by this gyrogen and sympy (`gyrogen
+    generate`'s, a sweep's): the same bytes, without deriving again."""
+    from gyrogen.codegen.generate import claim
+    from gyrogen.files import write_atomic
+    from gyrogen.runtime.scene_build import build_dir, scene_sources
 
-    def announce(unit: SceneContext) -> None:
-        written(unit)
-        click.echo(f"building {', '.join(scene.targets)} through cffi ...")
-
-    unit, backends = build_scene(scene, directory, scene.targets, announce)
-    return unit, _compare(scene, list(backends.values()), *counts)
+    claim(directory, scene.name)
+    sources = scene_sources(scene)
+    write_atomic(directory, sources.files)
+    written()
+    click.echo(f"building {', '.join(scene.targets)} through cffi ...")
+    backends = build_dir(directory, scene.targets)
+    return sources.build_id, _compare(scene, list(backends.values()), *counts)
 
 
 def _compare(scene: Scene, backends: list[Compiled], states: int, params: int, seed: int) -> bool:

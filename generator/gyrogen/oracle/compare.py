@@ -87,15 +87,36 @@ CHUNK = 20_000
 """Rows per call of a stacked evaluation (bounds the reference's temporaries)."""
 
 
+class TermSizes:
+    """S of f's values at states' rows (term_sizes), each row measured once
+    however many comparisons ask for it (a function's pairs share them)."""
+
+    def __init__(self, f: Function, states: np.ndarray, p: np.ndarray) -> None:
+        self.f, self.states, self.p = f, states, p
+        self.known = np.zeros(len(states), dtype=bool)
+        self.sizes: np.ndarray | None = None
+
+    def at(self, rows: np.ndarray) -> np.ndarray:
+        new = rows[~self.known[rows]]
+        if len(new):
+            measured = term_sizes(self.f, self.states[new], self.p)
+            if self.sizes is None:
+                self.sizes = np.zeros((len(self.states), measured.shape[1]))
+            self.sizes[new], self.known[new] = measured, True
+        assert self.sizes is not None
+        return self.sizes[rows]
+
+
 def size_scaled_error(a: np.ndarray, b: np.ndarray, f: Function, states: np.ndarray,
-                      p: np.ndarray) -> float:  # fmt: skip
-    """max |a - b| / (1 + |b| + S) over every element (see the module's docstring)."""
+                      p: np.ndarray, sizes: TermSizes | None = None) -> float:  # fmt: skip
+    """max |a - b| / (1 + |b| + S) over every element (see the module's
+    docstring); sizes: the S already measured at some of the states."""
     a, b = np.atleast_2d(a), np.atleast_2d(b)
     err = np.abs(a - b) / (1.0 + np.abs(b))
     rows = np.flatnonzero(np.max(err, axis=1) > SUSPECT)
     if len(rows):
-        sizes = term_sizes(f, states[rows], p)
-        err[rows] = np.abs(a[rows] - b[rows]) / (1.0 + np.abs(b[rows]) + sizes)
+        s = (TermSizes(f, states, p) if sizes is None else sizes).at(rows)
+        err[rows] = np.abs(a[rows] - b[rows]) / (1.0 + np.abs(b[rows]) + s)
     return float(np.max(err))
 
 
@@ -224,10 +245,12 @@ def _pairs(
             ref = np.where(np.any(list(both.values()), axis=0), 0.0, ref)
         else:
             out = {_label(b): b.output(name, states, constants[_label(b)], t) for b in backends}
+        sizes = TermSizes(f, states, p)  # one measure of a row's S for every pair
         for label, value in out.items():
-            yield f"{label} vs reference{tag}", size_scaled_error(value, ref, f, states, p)
+            err = size_scaled_error(value, ref, f, states, p, sizes)
+            yield f"{label} vs reference{tag}", err
         if len(out) == 2:
-            c_vs_f = size_scaled_error(out["C"], out["Fortran"], f, states, p)
+            c_vs_f = size_scaled_error(out["C"], out["Fortran"], f, states, p, sizes)
             yield f"C vs Fortran{tag}", c_vs_f
     few, reference = states[:JAC_STATES], None
     for b in backends:
@@ -284,12 +307,10 @@ def _bar(pair: str, cond: float, bar: Callable[[float], float]) -> float:
 
 def _time_span(scene: Scene) -> tuple[float, float]:
     """Times to evaluate at: across a T(t) table and beyond both its ends."""
-    tables = [scene.effects.torque_table, *(r.torque_table for r in scene.rotors)]
-    tables += [r.gimbal.torque_table for r in scene.rotors if r.gimbal is not None]
-    times = [t for table in tables if table for t, _ in table]
-    if not times:
+    times = scene_view.table_times(scene)
+    if not times.size:
         return (0.0, 1.0)
-    t0, t1 = min(times), max(times)
+    t0, t1 = float(times[0]), float(times[-1])
     return (t0 - 0.1 * (t1 - t0) - 1.0, t1 + 0.1 * (t1 - t0) + 1.0)
 
 

@@ -10,6 +10,8 @@ the scene defines it (Rotor.spin_axis).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from gyrogen.abi_rotors import GIMBAL_KEYS, rotor_name
@@ -36,12 +38,19 @@ def _axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
     both axes folded, Rotor.spin_axis; else the given spin axis less its
     part along the unit gimbal axis, normalized."""
     if r.gimbal is not None and "runtime" not in (r.axis, r.gimbal.axis):
-        return np.array([float(x) for x in r.spin_axis])
+        return np.array(_spin_axis(r))
     g = _raw(r.axis, "g", k, runtime)
     if r.gimbal is not None:
         g_g = _gimbal_axis(r, k, runtime)
         g = g - np.dot(g, g_g) * g_g
     return g / np.linalg.norm(g)
+
+
+@lru_cache(maxsize=256)
+def _spin_axis(r: Rotor) -> tuple[float, ...]:
+    """Rotor.spin_axis in floats, its exact rationals computed once per rotor
+    (values is asked for at every call of the reference)."""
+    return tuple(float(x) for x in r.spin_axis)
 
 
 def _gimbal_axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
@@ -110,11 +119,13 @@ def _split(scene: Scene, xs: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def demanded(
-    scene: Scene, runtime: dict[str, float], xs: np.ndarray, t: Time = 0.0
-) -> tuple[np.ndarray, np.ndarray]:
-    """(u_s, u_g) (M, N) as each law asks, before a clamp."""
+    scene: Scene, runtime: dict[str, float], xs: np.ndarray, t: Time = 0.0,
+    f: gimbal_reference.Frames | None = None,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(u_s, u_g) (M, N) as each law asks, before a clamp (f: the frames at
+    xs's gimbal angles, if the caller has them)."""
     v, s = values(scene, runtime), _split(scene, xs)
-    omega = gimbal_reference.relative_spin(v, s["gam"], s["w_A"], s["w"])
+    omega = gimbal_reference.relative_spin(v, s["gam"], s["w_A"], s["w"], f)
     u_s = cluster_reference.demanded_torques(scene, runtime, omega, t)
     u_g = np.zeros_like(u_s)
     for k, r in enumerate(scene.rotors, 1):
@@ -142,10 +153,11 @@ def _limits(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
 
 
 def torques(
-    scene: Scene, runtime: dict[str, float], xs: np.ndarray, t: Time = 0.0
-) -> tuple[np.ndarray, np.ndarray]:
+    scene: Scene, runtime: dict[str, float], xs: np.ndarray, t: Time = 0.0,
+    f: gimbal_reference.Frames | None = None,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """(u_s, u_g) (M, N), each clamped to its limit."""
-    u_s, u_g = demanded(scene, runtime, xs, t)
+    u_s, u_g = demanded(scene, runtime, xs, t, f)
     wheel, gimbal = _limits(scene)
     return np.clip(u_s, -wheel, wheel), np.clip(u_g, -gimbal, gimbal)
 
@@ -191,11 +203,12 @@ def steering_singularity(
 def rhs(scene: Scene, xs: np.ndarray, runtime: dict[str, float], t: Time = 0.0) -> np.ndarray:
     """dx/dt in the scene's state order; the quaternion rates are the caller's."""
     v, s = values(scene, runtime), _split(scene, xs)
-    u_s, u_g = torques(scene, runtime, xs, t)
+    f = gimbal_reference.frames(v, s["gam"])  # once: every part below reads them
+    u_s, u_g = torques(scene, runtime, xs, t, f)
     w_a_dot, _, gd_dot, w_dot = gimbal_reference.derivatives(
-        v, s["w_A"], s["gam"], s["gd"], s["w"], u_s, u_g
+        v, s["w_A"], s["gam"], s["gd"], s["w"], u_s, u_g, f
     )
-    omega = gimbal_reference.relative_spin(v, s["gam"], s["w_A"], s["w"])
+    omega = gimbal_reference.relative_spin(v, s["gam"], s["w_A"], s["w"], f)
     column = {f"u{i}": w_a_dot[:, i - 1] for i in (1, 2, 3)}
     for k in range(1, len(scene.rotors) + 1):
         column.update({f"gam{k}": s["gd"][:, k - 1], f"gd{k}": gd_dot[:, k - 1],
@@ -218,12 +231,14 @@ def outputs(scene: Scene, name: str, xs: np.ndarray, runtime: dict[str, float],
     rotor's motor power u_s Omega + u_g gd (M, N)."""
     v, s = values(scene, runtime), _split(scene, xs)
     motion = (v, s["w_A"], s["gam"], s["gd"], s["w"])
+    f = gimbal_reference.frames(v, s["gam"])
     if name == "kinetic_energy":
-        return gimbal_reference.kinetic_energy(*motion)[:, None]
+        return gimbal_reference.kinetic_energy(*motion, f)[:, None]
     if name == "angular_momentum":
-        return np.einsum("nij,ni->nj", dcm, gimbal_reference.angular_momentum(*motion))
+        h = gimbal_reference.angular_momentum(*motion, f)
+        return (dcm.swapaxes(-1, -2) @ h[..., None])[..., 0]
     if name == "power":
-        return gimbal_reference.power(*motion, *torques(scene, runtime, xs, t))
+        return gimbal_reference.power(*motion, *torques(scene, runtime, xs, t, f), f)
     raise KeyError(name)
 
 

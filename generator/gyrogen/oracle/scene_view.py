@@ -133,6 +133,14 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
     return out
 
 
+def table_times(scene: Scene) -> np.ndarray:
+    """The sorted times of every T(t) table's points (the single rotor's,
+    each wheel's, each gimbal's): where a tabulated torque's slope jumps."""
+    tables = [scene.effects.torque_table, *(r.torque_table for r in scene.rotors)]
+    tables += [r.gimbal.torque_table for r in scene.rotors if r.gimbal is not None]
+    return np.unique([float(t) for table in tables if table for t, _ in table])
+
+
 def _body_rates(scene: Scene) -> list[int]:
     """Where u1..u3 sit in a cluster's x[]."""
     return [scene.states.index(f"u{i}") for i in (1, 2, 3)]

@@ -80,16 +80,31 @@ def code_digest() -> str:
     return h.hexdigest()[:16]
 
 
+def _stored(scene: Scene) -> Path:
+    """Where the scene's rendered sources are kept: the build cache's
+    sources/, keyed by the scene, this gyrogen's code and sympy's version."""
+    text = json.dumps([scene.model_dump(mode="json"), code_digest(), version("sympy")])
+    key = hashlib.sha256(text.encode()).hexdigest()[:24]
+    return cache_dir() / "sources" / f"{key}.json"
+
+
+def keep_sources(scene: Scene, build_id: str, files: Mapping[str, str]) -> None:
+    """Keep a scene's rendered sources (render_all's, without --lib's build
+    files) for the next scene_sources (a cache not written costs only the
+    next derivation)."""
+    held = json.dumps({"build_id": build_id, "files": dict(files)})
+    path = _stored(scene)
+    with suppress(GyrogenError):
+        write_atomic(path.parent, {path.name: held}, keep=True)
+
+
 def scene_sources(scene: Scene, portable: bool = False) -> Sources:
     """The scene's rendered sources (built as C when it has a C target, else
     Fortran): from the cache when this gyrogen and sympy rendered them
     before (then sympy is not even imported), else rendered and kept."""
     language: Language = "c" if "c" in scene.targets else "fortran"
-    text = json.dumps([scene.model_dump(mode="json"), code_digest(), version("sympy")])
-    key = hashlib.sha256(text.encode()).hexdigest()[:24]
-    stored = cache_dir() / "sources"
     try:
-        held = json.loads((stored / f"{key}.json").read_text(encoding="utf-8"))
+        held = json.loads(_stored(scene).read_text(encoding="utf-8"))
         return Sources(str(held["build_id"]), language, dict(held["files"]), portable)
     except (OSError, ValueError, KeyError, TypeError):
         pass
@@ -97,9 +112,7 @@ def scene_sources(scene: Scene, portable: bool = False) -> Sources:
     from gyrogen.codegen.generate import render_all, unit_of
 
     files = render_all(unit_of(scene))
-    held = json.dumps({"build_id": build_id(scene), "files": files})
-    with suppress(GyrogenError):  # a cache not written costs only the next derivation
-        write_atomic(stored, {f"{key}.json": held}, keep=True)
+    keep_sources(scene, build_id(scene), files)
     return Sources(build_id(scene), language, files, portable)
 
 

@@ -31,7 +31,7 @@ from pydantic import (
 )
 
 from gyrogen import methods
-from gyrogen.abi import CONTROLLER_PARAMETERS, MIN_RTOL, PARAMETERS, STATES
+from gyrogen.abi import CONTROLLER_PARAMETERS, MIN_RTOL, PARAMETERS, STATES, unit_and_doc
 from gyrogen.abi_rotors import MAX_ROTORS, rotor_name
 from gyrogen.errors import SceneError
 from gyrogen.limits import MAX_EVENTS, MAX_SCENE_BYTES
@@ -311,6 +311,11 @@ class Scene(_Strict):
             if r.gimbal is not None and r.gimbal.tau_max is not None:
                 return f"gimbal {k}'s motor torque is clamped to tau_max"
         return None
+
+    def unit_and_doc(self, name: str) -> tuple[str, str]:
+        """A state's or parameter's unit and meaning in this scene
+        (abi.unit_and_doc; a rotor on a gimbal's keys as ON_GIMBAL says)."""
+        return unit_and_doc(name, rotors.gimbals(self.rotors))
 
     @property
     def states(self) -> tuple[str, ...]:

@@ -61,7 +61,7 @@ class Event(BaseModel):
     @classmethod
     def _expr(cls, v: str) -> str:
         parse(v)  # the grammar; the names are checked against the scene's
-        return v
+        return " ".join(v.split())  # one line wherever it is shown (a header, the manifest)
 
 
 def _shown(text: str) -> str:
@@ -69,9 +69,11 @@ def _shown(text: str) -> str:
 
 
 def parse(text: str) -> Node:
-    """text as a Node, or ValueError naming what is not allowed."""
+    """text as a Node, or ValueError naming what is not allowed. Line breaks
+    and indentation are spaces (a TOML multi-line string)."""
+    text = " ".join(text.split())
     try:
-        tree = ast.parse(text.strip(), mode="eval")
+        tree = ast.parse(text, mode="eval")
     except SyntaxError as exc:
         raise ValueError(f"{_shown(text)} is not an expression ({exc.msg})") from None
     except (ValueError, RecursionError, MemoryError) as exc:  # a NUL byte, a deep nest
@@ -102,7 +104,7 @@ def _node(e: ast.expr, text: str) -> Node:
         op = _OPS[type(e.op)]
         right = _node(e.right, text)
         if op == "**" and not _constant(right):
-            shown = ast.get_source_segment(text.strip(), e.right) or "it"
+            shown = ast.get_source_segment(text, e.right) or "it"
             raise ValueError(f"{_shown(text)}: an exponent must be a number, not {shown!r}")
         return (op, _node(e.left, text), right)
     if isinstance(e, ast.Call) and isinstance(e.func, ast.Name) and not e.keywords:
@@ -121,7 +123,7 @@ def _node(e: ast.expr, text: str) -> Node:
         and e.slice.value >= 0
     ):
         return ("output", e.value.id, e.slice.value)
-    shown = ast.get_source_segment(text.strip(), e) or type(e).__name__
+    shown = ast.get_source_segment(text, e) or type(e).__name__
     raise ValueError(
         f"{_shown(text)}: {shown!r} is not allowed (numbers, names, + - * / **, parentheses, "
         f"{', '.join(FUNCTIONS)}, an output's component as angular_momentum[i])"

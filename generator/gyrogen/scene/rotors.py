@@ -327,9 +327,17 @@ def check_gimbal(r: Rotor, where: str = "gimbal.axis") -> None:
     assert r.gimbal is not None
     if r.axes_at_runtime:
         return
-    dot = abs(
-        sum(float(a) * float(b) for a, b in zip(r.unit_axis, r.gimbal.unit_axis, strict=True))
-    )
+    spin, g_g = ((float(x), float(y), float(z)) for x, y, z in (r.unit_axis, r.gimbal.unit_axis))
+    check_perpendicular(spin, g_g, where)
+
+
+def check_perpendicular(
+    spin: tuple[float, float, float], g_g: tuple[float, float, float], where: str
+) -> None:
+    """A spin axis g_s0 and its gimbal axis g_g (directions: check_axis)
+    perpendicular within GIMBAL_PERP_SLACK, the cosine of their angle."""
+    dot = abs(sum(a * b for a, b in zip(spin, g_g, strict=True)))
+    dot /= math.sqrt(sum(a * a for a in spin) * sum(b * b for b in g_g))
     if not dot <= GIMBAL_PERP_SLACK:
         raise ValueError(
             f"{where}: not perpendicular to the spin axis (|g_s0 . g_g| = {dot:.6g} > "

@@ -56,6 +56,19 @@ class Blocks:
         return [list(range(s, i)) for i, s in enumerate(self.start)]
 
     @property
+    def stored(self) -> list[list[int]]:
+        """Per row: the columns the decomposition and the solves read and
+        write: its coupled ones, its block's and U's beyond it (the same for
+        every row of a block, so that row exchanges stay among them). Every
+        entry of J that can be nonzero is one of them; the rest of the
+        matrix is never touched."""
+        coupled = self.coupled or tuple(() for _ in self.upper)
+        return [
+            [*cs, *range(s, e), *(j for j in up if j >= e)]
+            for cs, s, e, up in zip(coupled, self.start, self.end, self.upper, strict=True)
+        ]
+
+    @property
     def parts(self) -> list[tuple[int, int]]:
         """The rows [start, end) solved one after the other: x, then what
         reads it (coupled_from), or every row at once."""

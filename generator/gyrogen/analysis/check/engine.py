@@ -28,18 +28,12 @@ from gyrogen.abi import (
 )
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import invariants
-from gyrogen.analysis.simulate.engine import compiled_again
-from gyrogen.analysis.simulate.trajectory import (
-    QUAD_NODES,
-    from_samples,
-    sample_times,
-    steps_of_segments,
-)
+from gyrogen.analysis.simulate.trajectory import Trajectory
 from gyrogen.oracle import gimbal_view, scene_view
 from gyrogen.oracle.cluster_reference import clamp_margins
 from gyrogen.physics import LUMPED_FROM, lumped_inertias
 from gyrogen.runtime.compiled import Compiled, Controls, controls
-from gyrogen.runtime.segment import COUNTERS, integrate_segments
+from gyrogen.runtime.segment import integrate_segments, resampled
 from gyrogen.scene import Scene
 from gyrogen.scene.rotors import unit_axes
 
@@ -80,9 +74,9 @@ class Case:
     extreme: Extreme | None = None
     """None: the figure states the scene's description instead."""
     quadrature: bool = False
-    """Judge the energy balance and the first rotor's rate by Gauss-Legendre
-    quadrature along the run (any torque law: a clamp, friction) rather than
-    in closed form; the run is sampled at the quadrature nodes too."""
+    """Judge the energy balance and the first rotor's rate by quadrature
+    along the run (any torque law: a clamp, friction) rather than in closed
+    form, on the run's dense output (simulate/trajectory.py)."""
     refused_by: str = ""
     """The scene's own validation refused the case's values (folded into the
     code, they are checked when it is generated): its one line. Nothing is
@@ -146,29 +140,17 @@ def run_case(case: Case, comp: Compiled | None) -> Result:
     given = controls(res.method, steps=steps, rtol=TOL, atol=TOL, max_steps=10**8)
     if case.quadrature:
         ts = _with_clamp_switches(comp, res.method, (x0, c, p), ts, given, scene)
-    times = sample_times(ts) if case.quadrature else ts
-    seg = integrate_segments(comp, res.method, x0, c, times, given)
+    seg = integrate_segments(comp, res.method, x0, c, ts, given)
     res.stats, res.code, res.stopped = seg.totals, seg.code, seg.stopped
-    every = QUAD_NODES + 1 if case.quadrature else 1
-    res.intervals = _merged(seg.intervals, every)
-    res.trajectory, res.times = seg.states[::every], ts[: len(seg.states[::every])]
+    res.intervals = tuple(dict(s) for s in seg.intervals)
+    res.trajectory, res.times = seg.states, ts[: len(seg.states)]
     if case.quadrature and seg.code == 0:
-        again = compiled_again(comp, res.method, c, (TOL, TOL), 10**8)
-        across = steps_of_segments(np.array([s["accepted"] for s in seg.intervals]))
-        traj = from_samples(ts, times, seg.states, 0, 0.0, again, across)
+        sample = resampled(comp, res.method, c, given, ts, seg.states)
+        lengths = np.diff(ts) / np.maximum([s["accepted"] for s in seg.intervals], 1)
+        traj = Trajectory(ts, seg.states, 0, 0.0, sample, (TOL, TOL), (ts, lengths))
         res.drift_series = invariants.by_quadrature(scene, p, traj)
     _judge(res, p, c, comp)
     return res
-
-
-def _merged(intervals: tuple[Mapping[str, Any], ...], every: int) -> tuple[dict[str, Any], ...]:
-    """Each run of `every` consecutive intervals' statistics as one: the
-    counters summed, the time reached and the last step of its last."""
-    out = []
-    for i in range(0, len(intervals), every):
-        group = intervals[i : i + every]
-        out.append({**group[-1], **{k: sum(s[k] for s in group) for k in COUNTERS}})
-    return tuple(out)
 
 
 def _with_clamp_switches(

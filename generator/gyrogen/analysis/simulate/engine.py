@@ -4,54 +4,47 @@ implicit one for a stiff scene, analysis/check/stiffness.py), check the invarian
 the numpy reference (analysis/simulate/invariants.py), and write the trajectory (CSV,
 npz), a summary and a figure (analysis/simulate/files.py), all or nothing.
 
-The trajectory is sampled on the output grid and at the quadrature nodes
-inside each interval (analysis/simulate/trajectory.py). Between solver steps the
-output comes from solve_ivp's dense output, which is less accurate than the
-steps themselves: in a long DOP853 step it can be off by far more than rtol
-(speed_controlled: 1e-7 mid-step), and the residuals show it. They measure
-the trajectory as written, not only the steps. A compiled integrator is run
-from each sample time to the next: every sample is a step end.
+The run is one function of time: its states on the output grid and, for
+the quadrature of the balances, anywhere between (analysis/simulate/trajectory.py).
+A compiled integrator runs from each grid time (and each torque table's
+point) to the next, so every grid state is a step end; the quadrature
+samples a segment by running it again as a `_grid` call (the same steps,
+their dense output). solve_ivp runs from each table's point to the next,
+its dense output kept, the grid read from it: between steps it is less
+accurate than the steps themselves (DOP853 in a long step: 1e-7 mid-step on
+speed_controlled), and the residuals show it: they measure the trajectory
+as written, not only the steps.
 """
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import scipy.integrate
 from scipy.integrate import solve_ivp
 
 from gyrogen import methods
-from gyrogen.abi import MIN_RTOL, ODE_CODES, ODE_EVENT, ODE_LOG_FULL, message
+from gyrogen.abi import ODE_CODES, ODE_EVENT, ODE_LOG_FULL, message
 from gyrogen.analysis.check import stiffness
 from gyrogen.analysis.simulate import files
 from gyrogen.analysis.simulate.invariants import along_trajectory, words
 from gyrogen.analysis.simulate.result import Result, Settings
-from gyrogen.analysis.simulate.trajectory import (
-    QUAD_NODES,
-    Again,
-    Trajectory,
-    from_samples,
-    output_grid,
-    sample_times,
-    steps_between,
-    steps_of_segments,
-)
+from gyrogen.analysis.simulate.trajectory import Trajectory, output_grid
 from gyrogen.errors import GyrogenError, SceneError
 from gyrogen.files import can_write, transaction, write_atomic
+from gyrogen.oracle import scene_view
 from gyrogen.runtime.compiled import Compiled, Controls, EventLog, controls
 from gyrogen.runtime.rhs import RawRhs
 from gyrogen.runtime.scene_build import build_files, scene_sources
-from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments
+from gyrogen.runtime.segment import ERR_MAX_STEPS, integrate_segments, resampled
 from gyrogen.scene import Scene
 
-QUAD_RTOL = 20 * MIN_RTOL
-"""The tightest tolerance the quadrature's integrations again ask for."""
 Advance = Callable[[int], None]
 """Told how many more percent of the simulated time are done."""
 Progress = Callable[[str], AbstractContextManager[Advance]]
@@ -114,23 +107,26 @@ class _Rhs(RawRhs):
 @dataclass(frozen=True)
 class Start:
     """What an integration starts from: the backend and its constants, the
-    state at t = 0, and the scene's (rtol, atol)."""
+    state at t = 0, the scene's (rtol, atol), and the times the run stops
+    and starts again at (its torque tables' points, where the rhs is not
+    smooth in t: a step across one loses its order, or steps over a narrow
+    pulse unseen)."""
 
     comp: Compiled
     c: np.ndarray
     x0: np.ndarray
     tol: tuple[float, float]
+    breaks: np.ndarray = field(default_factory=lambda: np.empty(0))
 
 
 def integrate(start: Start, settings: Settings, advance: Advance) -> Trajectory:
-    """From 0 to the grid's end, sampled on the grid and the quadrature
-    nodes, by solve_ivp or a compiled integrator (settings.method); a
-    failure is one line with the time reached."""
+    """From 0 to the grid's end by solve_ivp or a compiled integrator
+    (settings.method): the states on the grid, and the same run's at any
+    other times (its dense output, for the quadrature); a failure is one
+    line with the time reached."""
     grid = output_grid(settings.t_end, settings.dt)
-    samples = sample_times(grid)
     compiled = settings.method in methods.NAMES
-    run = (_by_integrator if compiled else _by_solve_ivp)(start, samples, settings, advance)
-    return from_samples(grid, samples, *run[:3], _again(start, settings), run[3])
+    return (_by_integrator if compiled else _by_solve_ivp)(start, grid, settings, advance)
 
 
 def _controls(start: Start, settings: Settings) -> Controls:
@@ -139,68 +135,31 @@ def _controls(start: Start, settings: Settings) -> Controls:
     return controls(settings.method, steps=100, rtol=rtol, atol=atol, max_steps=settings.max_nfev)
 
 
-def _again(start: Start, settings: Settings) -> Again:
-    """The run's method again from a state at a time, for the quadrature's
-    bisection (trajectory.running_integrals)."""
-    comp, c, method = start.comp, start.c, settings.method
-    if method in methods.NAMES:
-        return compiled_again(comp, method, c, start.tol, settings.max_nfev)
-    rhs, tight = RawRhs(comp, c), tighter(start.tol)
-
-    def scipy(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray | None:
-        sol = solve_ivp(rhs, (a, times[-1]), xa, method, times, rtol=tight[0], atol=tight[1])
-        good = sol.status == 0 and sol.y.shape[1] == len(times) and np.all(np.isfinite(sol.y))
-        return np.ascontiguousarray(sol.y.T) if good else None
-
-    return Again(scipy, start.tol, tight)
-
-
-def tighter(tol: tuple[float, float]) -> tuple[float, float]:
-    """(rtol, atol) a thousand times tighter, or as far as QUAD_RTOL."""
-    rtol, atol = tol
-    factor = max(QUAD_RTOL, rtol * 1e-3) / rtol
-    return rtol * factor, atol * factor
-
-
-def compiled_again(
-    comp: Compiled, method: str, c: np.ndarray, tol: tuple[float, float], max_steps: int
-) -> Again:
-    """A compiled integrator again from a state at a time (tighter than tol)
-    for the quadrature's bisection: simulate's runs and check's cases."""
-    tight = tighter(tol)
-    given = controls(method, steps=100, rtol=tight[0], atol=tight[1], max_steps=max_steps)
-
-    def states(a: float, xa: np.ndarray, times: np.ndarray) -> np.ndarray | None:
-        seg = integrate_segments(comp, method, xa, c, np.concatenate([[a], times]), given)
-        return seg.states[1:] if seg.code == 0 else None
-
-    return Again(states, tol, tight)
-
-
 def _by_integrator(
-    start: Start, samples: np.ndarray, settings: Settings, advance: Advance
-) -> tuple[np.ndarray, int, float, np.ndarray]:
-    """The generated integrator from each sample time to the next: every
-    output is a step end, so no interpolation error (rk4: 100 steps an
-    interval). The states, the RHS calls, the seconds it took and its steps
-    across each output interval."""
+    start: Start, grid: np.ndarray, settings: Settings, advance: Advance
+) -> Trajectory:
+    """The generated integrator from each time of the grid and start.breaks
+    to the next: every grid state a step end (rk4: 100 steps a segment).
+    Its states anywhere else: the segment run again (runtime.segment.resampled:
+    the same steps, their dense output)."""
     comp, method = start.comp, settings.method
     if method not in comp.manifest["integrators"]:
         raise SceneError(
             f"{comp.manifest['prefix']}: method {method} is not among the scene's integrators "
             f"({', '.join(comp.manifest['integrators']) or 'none'})"
         )
+    ends = _edges(start, grid)
     shown = [0]
 
     def reached(t: float) -> None:
-        pct = int(100 * t / samples[-1])
+        pct = int(100 * t / ends[-1])
         advance(pct - shown[0])
         shown[0] = pct
 
     given = _controls(start, settings)
     t0 = time.perf_counter()
     budget = settings.max_nfev
-    seg = integrate_segments(comp, method, start.x0, start.c, samples, given, reached, budget)
+    seg = integrate_segments(comp, method, start.x0, start.c, ends, given, reached, budget)
     wall = time.perf_counter() - t0
     if seg.code != 0:
         why = message(ODE_CODES, seg.code)
@@ -209,36 +168,52 @@ def _by_integrator(
                 method, comp.manifest["integrators"]
             )
         raise GyrogenError(f"{method} failed at t = {seg.totals['t']:.6g} s: {why}")
-    steps = steps_of_segments(np.array([s["accepted"] for s in seg.intervals]))
-    return seg.states, int(seg.totals["rhs_calls"]), wall, steps
+    sample = resampled(comp, method, start.c, given, ends, seg.states)
+    x = seg.states[np.isin(ends, grid)]
+    steps = np.diff(ends) / np.maximum([s["accepted"] for s in seg.intervals], 1)
+    nfev = int(seg.totals["rhs_calls"])
+    return Trajectory(grid, x, nfev, wall, sample, start.tol, (ends, steps))
 
 
 def _by_solve_ivp(
-    start: Start, samples: np.ndarray, settings: Settings, advance: Advance
-) -> tuple[np.ndarray, int, float, np.ndarray]:
-    """solve_ivp through the raw rhs, its dense output at the sample times:
-    the states, the RHS calls, the seconds it took and its steps across each
-    output interval (counted by a subclass of its solver)."""
-    t_end, ends = samples[-1], []
+    start: Start, grid: np.ndarray, settings: Settings, advance: Advance
+) -> Trajectory:
+    """solve_ivp through the raw rhs from each of start.breaks to the next,
+    its dense output kept: the states on the grid, and at any other times
+    from the same interpolants."""
+    t_end = grid[-1]
     f = _Rhs(start.comp, start.c, t_end, advance, settings.max_nfev)
     rtol, atol = start.tol
-
-    class Counted(getattr(scipy.integrate, settings.method)):  # type: ignore[misc]
-        def step(self) -> str | None:
-            said = super().step()
-            ends.append(self.t)
-            return said
-
+    edges = _edges(start, grid[[0, -1]])
+    x, dense, nfev, done = start.x0, [], 0, [np.zeros(1)]
     t0 = time.perf_counter()
-    try:
-        sol = solve_ivp(f, (0.0, t_end), start.x0, Counted, samples, rtol=rtol, atol=atol)
-    except _Exhausted:
-        sol = None
+    for a, b in itertools.pairwise(edges):
+        try:
+            sol = solve_ivp(f, (a, b), x, settings.method, dense_output=True, rtol=rtol, atol=atol)
+        except _Exhausted:
+            sol = None
+        check_solution(sol, settings.method, f.t_max, t_end, settings.max_nfev)
+        dense.append(sol.sol)
+        x, nfev = sol.y[:, -1], nfev + int(sol.nfev)
+        done.append(sol.t[1:])
     wall = time.perf_counter() - t0
-    check_solution(sol, settings.method, f.t_max, t_end, settings.max_nfev)
     f.finish()
-    steps = steps_between(samples[:: QUAD_NODES + 1], np.array(ends))
-    return np.ascontiguousarray(sol.y.T), int(sol.nfev), wall, steps
+
+    def sample(times: np.ndarray) -> np.ndarray:
+        which = np.clip(np.searchsorted(edges, times, "right") - 1, 0, len(dense) - 1)
+        out = np.empty((len(times), len(start.x0)))
+        for k in np.unique(which):
+            out[which == k] = dense[k](times[which == k]).T
+        return out
+
+    ends = np.concatenate(done)  # every step's end
+    return Trajectory(grid, sample(grid), nfev, wall, sample, start.tol, (ends, np.diff(ends)))
+
+
+def _edges(start: Start, times: np.ndarray) -> np.ndarray:
+    """times and start.breaks between the first and the last."""
+    inside = (start.breaks > times[0]) & (start.breaks < times[-1])
+    return np.union1d(times, start.breaks[inside])
 
 
 def given_constants(scene: Scene, comp: Compiled, p: np.ndarray) -> np.ndarray:
@@ -307,9 +282,8 @@ def run(
     can_write(out / "src", sources.files)
     comp = build_files(sources.files, [sources.language])[sources.language]
     c = given_constants(scene, comp, p)
-    start = Start(
-        comp, c, np.array(scene.initial_state()), (scene.simulate.rtol, scene.simulate.atol)
-    )
+    tol = (scene.simulate.rtol, scene.simulate.atol)
+    start = Start(comp, c, np.array(scene.initial_state()), tol, scene_view.table_times(scene))
     check_start(scene, start)
     end = output_grid(settings.t_end, settings.dt)[-1]
     if settings.method == methods.AUTO:
@@ -402,7 +376,8 @@ def summary_lines(res: Result) -> list[str]:
         f"  |H| in N        relative drift {worst['H_norm_relative_drift']:.2e} "
         f"(vector H: {worst['H_vector_relative_drift']:.2e})",
         f"  energy balance  K - K(0) - int P dt: {worst['energy_balance_relative_residual']:.2e}"
-        " of max K (quadrature: Gauss-Legendre, bisected where it misses a transient)",
+        " of max K (quadrature: Gauss-Legendre on the dense output, refined where it misses a "
+        "transient)",
         f"  {said.rate} check        {said.balance}: {worst['u4_relative_residual']:.2e}"
         f" of max |{said.rate}|",
         *(f"  quadrature      NOT RESOLVED: {why}" for why in res.invariants.unresolved),

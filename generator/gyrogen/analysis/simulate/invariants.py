@@ -126,12 +126,15 @@ class Invariants:
 
 def along_trajectory(scene: Scene, p: np.ndarray, traj: Trajectory) -> Invariants:
     """Every invariant at each grid time of traj, its integrals of P and T
-    by quadrature on the nodes inside the intervals."""
+    by quadrature on traj's dense output (the tables' points as ends of
+    its pieces: the torque's slope jumps there)."""
     x = traj.x
     h, k = momentum(scene, p, x), kinetic(scene, p, x)
     u4 = x[:, scene.states.index("w1" if scene.rotors else "u4")]
     scales = np.array([_scale(k), _scale(u4) * _axial(scene, p)])  # the balances' normalizers
-    integrals = running_integrals(traj, lambda t, xs: rates(scene, p, t, xs), scales)
+    integrals = running_integrals(
+        traj, lambda t, xs: rates(scene, p, t, xs), scales, scene_view.table_times(scene)
+    )
     work = integrals.values
     h_drift, h_vector_drift = momentum_drifts(h)
     return Invariants(

@@ -1,22 +1,33 @@
-"""A simulated trajectory: the output grid, the quadrature nodes sampled
-inside each of its intervals, and integrals over time by those nodes.
+"""A simulated trajectory: the output grid's states, the run's states at
+any other time (its dense output), and integrals over time by adaptive
+quadrature on that dense output.
 
-The integrals are Gauss-Legendre sums, QUAD_NODES nodes inside each output
-interval, sampled along with the grid (from solve_ivp's dense output, or as
-step ends of a compiled integrator): a trapezoid on the grid alone is off by
-~(dt/tau)^2 wherever the integrand changes on a time scale tau near dt (the
-speed controller's torque: 1e-2). A transient much shorter than dt
-(stiff_wheel's 1e-5 s at the start: the wheel's whole spin-up) or a kink (a
-clamped motor) falls between the nodes; there Simpson's rule on the
-interval's ends and midpoint disagrees with the nodes' sum, and the interval
-is bisected, its states integrated again from its start (Trajectory.again,
-at a tighter tolerance), until they agree to QUAD_TOL of the integral's
-scale, or to how far the rates are known (the states' tolerance times the
-rates' gain), or to rounding. An oscillation many periods to an interval
-(stiff_wheel's nutation at dt = 1000 s) fools both rules alike: an interval
-the integrator took several steps across (Trajectory.steps) is first cut
-into as many pieces, their states integrated again. What it could not
-resolve (bisections or pieces spent) Integrals.unresolved says.
+The run is one function of time: a compiled adaptive method's segment, run
+again from its start as a `_grid` call, takes the same steps whatever
+times it is asked for between its ends (rk4: every time a step end), and
+solve_ivp's dense output is kept (runtime/segment.resampled, engine.py). An
+integral is taken piece by piece, each output interval cut first at the
+integrand's known kinks (a torque table's points): on a piece, Gauss-Legendre
+with QUAD_NODES nodes, checked against Gauss-Lobatto with QUAD_NODES + 1
+(the piece's ends and QUAD_NODES - 1 nodes between, the same degree
+2 QUAD_NODES - 1). Where they disagree by more than the error allowed (QUAD_TOL
+of the integral's scale over the run, spread by length; rounding; on a piece
+no longer than a step, how far the rates are known: NOISE), the piece is cut
+into SPLIT and sampled again, in passes (each segment holding pieces run once
+a pass), at most MAX_PASSES. The Lobatto rule's ends see a transient
+shorter than the Gauss nodes' spacing at a piece's edge (stiff_wheel's 1e-5 s
+spin-up at the start); a kink (a clamped motor) makes the rules differ until
+the piece holding it is short; an oscillation of many periods to an
+interval (stiff_wheel's nutation at dt = 1000 s) aliases the two rules
+differently.
+
+QUAD_NODES = 8 for every method: inside one step an interpolant is a
+polynomial of degree d (dopri5 4, rodas4 and radau5's collocation 3, dop853
+7; the Taylor method's series of the order it takes, whose terms fall as the
+solution's own) and a power or torque a polynomial of degree 2 at most in the
+states for the smooth laws (a controller's torque times a rate), so of degree
+2 d <= 14 in time: both rules (degree 15) integrate a piece within one step
+exactly, and a piece across a step's end to the interpolant's own error.
 """
 
 from __future__ import annotations
@@ -24,57 +35,54 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-QUAD_NODES = 3
-"""Odd: the middle node is the interval's midpoint, which Simpson's rule shares."""
+QUAD_NODES = 8
+"""Gauss-Legendre nodes a piece (Gauss-Lobatto: one more, with the ends)."""
 QUAD_TOL = 1e-12
 """The quadrature error allowed in an integral over the whole run, relative
 to its scale (the balance's normalizer), spread over the run by length;
 and at least ROUNDING of each piece's |integrand| times its length."""
 ROUNDING = 1e3 * np.finfo(float).eps
-NOISE = 10.0
-"""Simpson's rule and the nodes agree when they differ by at most this times
-the width times how far the rates are known (_known)."""
-PROGRESS = 1.5
-"""A bisection goes on while it shrinks the rules' difference at least this
-much (a transient's halves: 2; a kink's: 4; a smooth rate's: 32); where it
-does not STALLS times in a row, the rates' noise is what they see (a kink
-near a node may stall once)."""
-STALLS = 3
-MAX_BISECTIONS = 10**5
-"""Intervals bisected in one run at most (a layer takes ~50); a piece still
-unresolved when they are spent keeps its nodes' sum, and the integrals say so."""
-MAX_PIECES = 10**6
-"""Pieces the integrator's steps may cut the intervals into, in one run at
-most (a state each, integrated again); past it, pieces wider than a step,
-and the integrals say so."""
-CHUNK = 4096
-"""Pieces of one interval integrated again at a time (their states in memory)."""
+NOISE = 1.0
+"""On a piece no longer than the integrator's mean step across it, the
+rules agree when they differ by at most this times how far the rates are
+known (_known) times the width: the interpolant's slope jumps at each
+step's end, which a piece across it sees, are of that size over a step.
+Without it stiff_wheel's pieces went on being cut past 16 passes; allowed
+on longer pieces too, its nutation at dt = 1000 s was taken 5e-5 of max K
+off (aliased), and with 10 its 1e-5 s transient 1e-8."""
+SPLIT = 8
+"""Pieces a piece whose rules disagree is cut into, for the next pass."""
+MAX_PASSES = 16
+"""Passes at most: SPLIT^16 ~ 3e14, a piece down to the rounding of its
+interval."""
+MAX_PIECES = 10**5
+"""Pieces cut in one pass at most (those whose rules disagree most); the
+others keep their Gauss sums, and the integrals say so."""
+CHUNK = 20_000
+"""Pieces sampled at a time (their states in memory)."""
 QUADRATURE = (
-    f"Gauss-Legendre, {QUAD_NODES} nodes per output interval (the states from solve_ivp's dense "
-    "output or the compiled integrator's step ends); an interval the integrator took several "
-    "steps across is cut into as many pieces (a fast oscillation the nodes would alias), their "
-    "states integrated again from its start; a piece is bisected and integrated again where "
-    f"Simpson's rule disagrees by more than {QUAD_TOL:g} of the scale (a transient, a kink)"
+    f"Gauss-Legendre, {QUAD_NODES} nodes a piece, on the run's dense output (the compiled "
+    "integrator's interpolant, each segment run again as a _grid call, or solve_ivp's); each "
+    f"output interval cut at the torque tables' points; a piece cut into {SPLIT} and sampled "
+    "again where "
+    f"Gauss-Lobatto with {QUAD_NODES + 1} nodes (its ends among them) disagrees by more than "
+    f"{QUAD_TOL:g} of the scale (a transient, a kink, an oscillation)"
 )
-_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(QUAD_NODES)
-_MID = QUAD_NODES // 2
+_G, _GW = np.polynomial.legendre.leggauss(QUAD_NODES)
+_LOBATTO = QUAD_NODES + 1
+_L = np.sort(np.polynomial.legendre.Legendre.basis(QUAD_NODES).deriv().roots())
+_LW = 2.0 / (_LOBATTO * QUAD_NODES * np.polynomial.legendre.Legendre.basis(QUAD_NODES)(_L) ** 2)
+_LW_END = 2.0 / (_LOBATTO * QUAD_NODES)
+_NODES = np.concatenate([[-1.0], _G, _L, [1.0]])
+"""A piece's sample points on [-1, 1]: its start, the Gauss nodes, Lobatto's inner ones, its end."""
+_GS, _LS = slice(1, 1 + QUAD_NODES), slice(1 + QUAD_NODES, _NODES.size - 1)
 
-
-@dataclass(frozen=True)
-class Again:
-    """The run's method once more from a state, for the quadrature's bisection."""
-
-    states: Callable[[float, np.ndarray, np.ndarray], np.ndarray | None]
-    """(a, x(a), times after a) -> the states at those times (None: it failed)."""
-    tol: tuple[float, float]
-    """(rtol, atol) of the trajectory's states."""
-    tighter: tuple[float, float]
-    """(rtol, atol) of states: tighter, so that the bisection measures the
-    trajectory rather than its own integration's error."""
+Sample = Callable[[np.ndarray], np.ndarray]
+"""times (m,) within the run, in any order -> the run's states there (m, nx);
+a failure raises."""
 
 
 @dataclass(frozen=True)
@@ -83,19 +91,16 @@ class Trajectory:
     """(n,) the output grid."""
     x: np.ndarray
     """(n, nx) states in the scene's order."""
-    t_nodes: np.ndarray
-    """(n - 1, QUAD_NODES) Gauss-Legendre nodes inside each output interval."""
-    x_nodes: np.ndarray
-    """(n - 1, QUAD_NODES, nx) the states there."""
     nfev: int
     wall: float
     """Seconds spent integrating."""
-    again: Again | None = None
-    """States anywhere inside an interval, for running_integrals' bisection
-    (None: the nodes' sums as they are)."""
-    steps: np.ndarray | None = None
-    """(n - 1,) the integrator's steps across each output interval (None:
-    one each): running_integrals cuts an interval into as many pieces."""
+    sample: Sample
+    """The same run's states at any times between the grid's ends."""
+    tol: tuple[float, float]
+    """(rtol, atol) the run's states are known to."""
+    spans: tuple[np.ndarray, np.ndarray]
+    """(ends (s + 1,), steps (s,)): stretches of the run and the mean length
+    of the integrator's steps across each (a segment's, or each step)."""
 
 
 @dataclass(frozen=True)
@@ -117,184 +122,133 @@ def output_grid(t_end: float, dt: float) -> np.ndarray:
         return np.minimum(np.arange(n) * dt, t_end)
 
 
-def sample_times(grid: np.ndarray) -> np.ndarray:
-    """The grid with the quadrature nodes of each interval between its
-    points, in order: every (QUAD_NODES + 1)-th time is a grid point."""
-    nodes = _inside(grid[:-1, None], grid[1:, None])
-    return np.concatenate([np.column_stack([grid[:-1], nodes]).ravel(), grid[-1:]])
-
-
-def from_samples(
-    grid: np.ndarray,
-    samples: np.ndarray,
-    y: np.ndarray,
-    nfev: int,
-    wall: float,
-    again: Again | None = None,
-    steps: np.ndarray | None = None,
-) -> Trajectory:
-    """Split the states y at the sample times into the output grid and the
-    quadrature nodes inside each interval (steps: Trajectory.steps)."""
-    step, n = QUAD_NODES + 1, len(grid)
-    inner = y[:-1].reshape(n - 1, step, -1)[:, 1:]  # drop the grid point opening each interval
-    t_nodes = samples[:-1].reshape(n - 1, step)[:, 1:]
-    return Trajectory(grid, y[::step], t_nodes, inner, nfev, wall, again, steps)
-
-
-def steps_of_segments(accepted: np.ndarray) -> np.ndarray:
-    """Trajectory.steps from a compiled run's accepted steps in each segment
-    between sample times (QUAD_NODES + 1 to an interval): a segment's last
-    step may be one cut short to end on its time, so 1 + the others."""
-    per = np.asarray(accepted, dtype=np.int64).reshape(-1, QUAD_NODES + 1)
-    return 1 + np.sum(np.maximum(per - 1, 0), axis=1)
-
-
-def steps_between(grid: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """Trajectory.steps from the times an integrator's steps ended (solve_ivp's):
-    1 + the ends strictly inside each interval."""
-    inside = np.searchsorted(ends, grid[1:], "left") - np.searchsorted(ends, grid[:-1], "right")
-    return 1 + np.maximum(inside, 0)
-
-
 Rates = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """(times (m,), states (m, nx)) -> rates (m, k)."""
 
 
 def running_integrals(
-    traj: Trajectory, rates: Rates, scales: np.ndarray | None = None
+    traj: Trajectory, rates: Rates, scales: np.ndarray, knots: np.ndarray | None = None
 ) -> Integrals:
-    """int_0^t of each rate at each grid time, Gauss-Legendre per interval;
-    with scales (k,) and traj.again, an interval the integrator took several
-    steps across (traj.steps) is cut into as many pieces, and an interval or
-    piece whose nodes miss what Simpson's rule sees is bisected (to QUAD_TOL
-    of scales)."""
-    n1, q = traj.t_nodes.shape
-    values = rates(traj.t_nodes.ravel(), traj.x_nodes.reshape(n1 * q, -1))
-    k = values.shape[1]
-    values = values.reshape(n1, q, k)
-    again = traj.again
-    if again is None or scales is None or not n1:
-        pieces = 0.5 * np.diff(traj.t)[:, None] * np.einsum("iqk,q->ik", values, _WEIGHTS)
-        return Integrals(np.vstack([np.zeros((1, k)), np.cumsum(pieces, axis=0)]))
-    ends = rates(traj.t, traj.x)
-    cap = _Budget(QUAD_TOL * np.asarray(scales) / (traj.t[-1] - traj.t[0]), MAX_BISECTIONS)
-    steps = np.ones(n1, np.int64) if traj.steps is None else np.maximum(traj.steps, 1)
-    if steps.sum() > MAX_PIECES:
-        cap.said.append(
-            f"the integrator took {steps.sum()} steps, more than the {MAX_PIECES} pieces the "
-            "quadrature cuts a run into: its pieces are wider than the steps, and may alias a "
-            "fast oscillation"
-        )
-        steps = np.maximum(steps * MAX_PIECES // steps.sum(), 1)
-    pieces = np.empty((n1, k))
-    for j in np.nonzero(steps > 1)[0]:
-        edge = _Edge(float(traj.t[j]), traj.x[j], ends[j])
-        cut = _cut(again, rates, cap, edge, float(traj.t[j + 1]), int(steps[j]))
-        cap.failed += cut is None
-        steps[j] = 1 if cut is None else steps[j]  # None: its nodes as they are, below
-        pieces[j] = 0.0 if cut is None else cut
-    i = np.nonzero(steps == 1)[0]
-    spans = _Spans(traj.t[i], traj.x[i], ends[i], traj.t[i + 1], ends[i + 1])
-    pieces[i] = _sums(
-        again, rates, cap, spans, traj.t_nodes[i], traj.x_nodes[i], values[i], again.tol
+    """int_0^t of each rate at each grid time: each output interval cut at
+    the knots (times where a rate may kink), each piece by Gauss-Legendre on
+    the dense output, cut into SPLIT and sampled again where Gauss-Lobatto
+    disagrees by more than QUAD_TOL of scales (k,)."""
+    grid = traj.t
+    inner = np.empty(0) if knots is None else np.asarray(knots, dtype=float)
+    edges = np.union1d(grid, inner[(inner > grid[0]) & (inner < grid[-1])])
+    a, b = edges[:-1], edges[1:]
+    owner = np.searchsorted(grid, a, "right") - 1
+    scales = np.asarray(scales, dtype=float)
+    sums = np.zeros((len(grid) - 1, scales.size))
+    cap = _Budget(QUAD_TOL * scales / max(grid[-1] - grid[0], np.finfo(float).tiny))
+    for passes in range(MAX_PASSES + 1):
+        if not a.size:
+            break
+        gauss, excess = _pieces(traj, rates, cap.per_second, a, b)
+        done = excess <= 1.0
+        if passes == MAX_PASSES:
+            cap.unresolved += int(np.sum(~done))
+            done[:] = True
+        a, b, owner = _cut(a, b, owner, excess, done, gauss, sums, cap)
+    _say(cap)
+    return Integrals(
+        np.vstack([np.zeros((1, scales.size)), np.cumsum(sums, axis=0)]), tuple(cap.said)
     )
-    if cap.failed:
-        cap.said.append(
-            f"{cap.failed} intervals the integrator stepped across several times could not be "
-            "integrated again in pieces: their nodes' sums are kept, and may alias"
-        )
-    if cap.short:
-        cap.said.append(
-            f"{cap.short} pieces still missed what Simpson's rule sees when the {MAX_BISECTIONS} "
-            "bisections were spent: their nodes' sums are kept, and may be off"
-        )
-    return Integrals(np.vstack([np.zeros((1, k)), np.cumsum(pieces, axis=0)]), tuple(cap.said))
 
 
 @dataclass
 class _Budget:
-    """What one run's quadrature may spend and what it could not resolve."""
+    """What one run's quadrature allows and what it could not resolve."""
 
     per_second: np.ndarray
     """(k,) the error allowed per second of each integral."""
-    left: int
-    short: int = 0
-    """Pieces left unresolved when the bisections were spent."""
-    failed: int = 0
+    unresolved: int = 0
+    """Pieces whose rules still disagreed after MAX_PASSES."""
+    capped: int = 0
+    """Pieces left uncut past MAX_PIECES."""
     said: list[str] = field(default_factory=list)
 
 
-@dataclass(frozen=True)
-class _Spans:
-    """Intervals (p of them): their starts' times, states and rates, their ends'
-    times and rates."""
-
-    t: np.ndarray
-    x: np.ndarray
-    f: np.ndarray
-    t_end: np.ndarray
-    f_end: np.ndarray
-
-
-def _sums(
-    again: Again, rates: Rates, cap: _Budget, spans: _Spans,
-    t_nodes: np.ndarray, x_nodes: np.ndarray, values: np.ndarray, tol: tuple[float, float],
-) -> np.ndarray:  # fmt: skip
-    """(p, k): each span's Gauss-Legendre sum on its nodes (times, states,
-    rates; states known to tol), bisected where Simpson's rule disagrees."""
-    half = 0.5 * (spans.t_end - spans.t)
-    pieces = half[:, None] * np.einsum("iqk,q->ik", values, _WEIGHTS)
-    noise = _known(rates, t_nodes[:, _MID], x_nodes[:, _MID], tol)
-    simpson = (half / 3.0)[:, None] * (spans.f + 4.0 * values[:, _MID] + spans.f_end)
-    near = np.max(np.abs(np.concatenate([spans.f[:, None], values, spans.f_end[:, None]], 1)), 1)
-    per_second = np.maximum(cap.per_second, noise)
-    agree = _agree(np.abs(simpson - pieces), near, 2 * half[:, None], per_second)
-    for i in np.nonzero(~agree)[0]:
-        edge = _Edge(float(spans.t[i]), spans.x[i], spans.f[i])
-        end = float(spans.t_end[i])
-        pieces[i] = _bisected(again, rates, cap, noise[i], edge, end, spans.f_end[i], values[i])
-    return pieces
+def _cut(
+    a: np.ndarray, b: np.ndarray, owner: np.ndarray, excess: np.ndarray, done: np.ndarray,
+    gauss: np.ndarray, sums: np.ndarray, cap: _Budget,
+) -> tuple[np.ndarray, ...]:  # fmt: skip
+    """Add the done pieces' (and the too short ones') Gauss sums to their
+    intervals' sums; the others cut into SPLIT each, the MAX_PIECES worst."""
+    worst = np.nonzero(~done)[0]
+    if worst.size * SPLIT > MAX_PIECES:
+        keep = worst[np.argsort(-excess[worst], kind="stable")[: MAX_PIECES // SPLIT]]
+        cap.capped += worst.size - keep.size
+        worst = np.sort(keep)
+    frac = np.arange(SPLIT + 1) / SPLIT
+    ends = a[worst, None] + (b - a)[worst, None] * frac  # (p, SPLIT + 1)
+    ends[:, -1] = b[worst]
+    nodes = np.sort(_times(ends[:, :-1].ravel(), ends[:, 1:].ravel()), axis=1)
+    distinct = np.all(np.diff(nodes, axis=1) > 0, axis=1).reshape(worst.size, SPLIT).all(axis=1)
+    worst = worst[distinct]  # too short to cut: the Gauss sum, to rounding
+    ends = ends[distinct]
+    keep = np.ones(a.size, dtype=bool)
+    keep[worst] = False
+    np.add.at(sums, owner[keep], gauss[keep])
+    starts, stops = ends[:, :-1].ravel(), ends[:, 1:].ravel()
+    return starts, stops, np.repeat(owner[worst], SPLIT)
 
 
-def _cut(again: Again, rates: Rates, cap: _Budget, a: _Edge, b: float, m: int) -> np.ndarray | None:
-    """int_a^b of the rates (k,) over m equal pieces, their states integrated
-    again from a, CHUNK pieces at a time, each bisected where Simpson's rule
-    disagrees (None: the pieces are too short for distinct nodes, or the
-    integration failed)."""
-    edges = a.t + (b - a.t) * (np.arange(1, m + 1) / m)
-    edges[-1] = b
-    total = np.zeros_like(a.f)
-    for lo in range(0, m, CHUNK):
-        ends = edges[lo : lo + CHUNK]
-        starts = np.concatenate([[a.t], ends[:-1]])
-        nodes = _inside(starts[:, None], ends[:, None])
-        times = np.column_stack([nodes, ends]).ravel()
-        if not np.all(np.diff(np.concatenate([[a.t], times])) > 0):
-            return None
-        xs = again.states(a.t, a.x, times)
-        if xs is None:
-            return None
-        fs = rates(times, xs)
-        p, q = len(ends), QUAD_NODES
-        xs, fs = xs.reshape(p, q + 1, -1), fs.reshape(p, q + 1, -1)
-        spans = _Spans(
-            starts,
-            np.concatenate([a.x[None], xs[:-1, q]]),
-            np.concatenate([a.f[None], fs[:-1, q]]),
-            ends,
-            fs[:, q],
+def _say(cap: _Budget) -> None:
+    if cap.unresolved:
+        cap.said.append(
+            f"{cap.unresolved} pieces still disagreed after {MAX_PASSES} passes (a piece cut "
+            f"into {SPLIT} each): their Gauss sums are kept, and may be off"
         )
-        total += _sums(again, rates, cap, spans, nodes, xs[:, :q], fs[:, :q], again.tighter).sum(0)
-        a = _Edge(float(ends[-1]), xs[-1, q], fs[-1, q])
-    return total
+    if cap.capped:
+        cap.said.append(
+            f"{cap.capped} pieces were left uncut past the {MAX_PIECES} a pass may cut: their "
+            "Gauss sums are kept, and may be off"
+        )
+
+
+def _pieces(
+    traj: Trajectory, rates: Rates, per_second: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each piece's Gauss sum (p, k), and its rules' difference over the
+    error it is allowed (p,: the worst integral's)."""
+    gauss, excess = np.empty((a.size, per_second.size)), np.empty(a.size)
+    for lo in range(0, a.size, CHUNK):
+        at = slice(lo, lo + CHUNK)
+        gauss[at], excess[at] = _rules(traj, rates, per_second, a[at], b[at])
+    return gauss, excess
+
+
+def _rules(
+    traj: Trajectory, rates: Rates, per_second: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """_pieces on one chunk: its pieces sampled in one run."""
+    p, q = a.size, _NODES.size
+    times = _times(a, b)
+    xs = traj.sample(times.ravel())
+    fs = rates(times.ravel(), xs).reshape(p, q, -1)
+    half = (0.5 * (b - a))[:, None]
+    gauss = half * np.einsum("pqk,q->pk", fs[:, _GS], _GW)
+    lobatto = half * (_LW_END * (fs[:, 0] + fs[:, -1]) + np.einsum("pqk,q->pk", fs[:, _LS], _LW))
+    mid = 1 + QUAD_NODES // 2
+    noise = _known(rates, times[:, mid], xs.reshape(p, q, -1)[:, mid], traj.tol)
+    near = np.max(np.abs(fs), axis=1)
+    ends, steps = traj.spans
+    step = steps[np.clip(np.searchsorted(ends, a, "right") - 1, 0, steps.size - 1)]
+    floor = np.where(2 * half <= step[:, None], 2 * half * noise, 0.0)  # a step long at most
+    allowed = 2 * half * np.maximum(per_second, ROUNDING * near) + floor
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.abs(gauss - lobatto) / allowed
+    ratio = np.where(np.abs(gauss - lobatto) == 0, 0.0, ratio)
+    return gauss, np.max(np.where(np.isnan(ratio), np.inf, ratio), axis=1)
 
 
 def _known(rates: Rates, t: np.ndarray, x: np.ndarray, tol: tuple[float, float]) -> np.ndarray:
     """(m, k): NOISE times how far the rates at (t, x) are known when x is
     known to rtol |x| + atol: their change along two such errors (of one
-    sign, and alternating). Simpson's rule and the nodes cannot agree
-    closer than that, and need not (k = 3000 N m s makes stiff_wheel's
-    wheel, known to 1e-8 rad/s, a torque known to 3e-5 N m)."""
+    sign, and alternating). The rules cannot agree closer than that, and
+    need not (k = 3000 N m s makes stiff_wheel's wheel, known to 1e-8
+    rad/s, a torque known to 3e-5 N m)."""
     dx = tol[0] * np.abs(x) + tol[1]
     sign = np.where(np.arange(x.shape[1]) % 2, -1.0, 1.0)
     f = rates(t, x)
@@ -302,68 +256,9 @@ def _known(rates: Rates, t: np.ndarray, x: np.ndarray, tol: tuple[float, float])
     return NOISE * moved
 
 
-def _agree(off: np.ndarray, near: np.ndarray, width: Any, per_second: np.ndarray) -> Any:
-    """Whether Simpson's rule and the nodes agree (off: their difference)
-    in every column (the last axis), to per_second times the width, or
-    ROUNDING of the width times the largest |rate| seen (near)."""
-    return np.all(off <= width * np.maximum(per_second, ROUNDING * near), axis=-1)
-
-
-@dataclass(frozen=True)
-class _Edge:
-    """An interval's start: its time, state and rates."""
-
-    t: float
-    x: np.ndarray
-    f: np.ndarray
-
-
-def _bisected(
-    again: Again, rates: Rates, cap: _Budget, noise: np.ndarray,
-    a: _Edge, b: float, fb: np.ndarray, nodes: np.ndarray, stalled: int = 0,
-) -> np.ndarray:  # fmt: skip
-    """int_a^b of the rates (k,), Gauss-Legendre on [a, b] (its nodes'
-    rates given, known to noise) where Simpson's rule agrees, else the sum
-    over its halves, their states integrated again from a."""
-    gauss, off, near = _rules(a.t, b, a.f, nodes, fb)
-    mid = 0.5 * a.t + 0.5 * b
-    times = np.concatenate([_inside(a.t, mid), [mid], _inside(mid, b)])
-    if _agree(off, near, b - a.t, np.maximum(cap.per_second, noise)):
-        return gauss
-    if not cap.left:
-        cap.short += 1
-        return gauss
-    if not np.all(np.diff(np.concatenate([[a.t], times, [b]])) > 0):
-        return gauss  # too short for distinct nodes
-    cap.left -= 1
-    xs = again.states(a.t, a.x, times)
-    if xs is None:
-        return gauss
-    fs = rates(times, xs)
-    m = _Edge(float(mid), xs[QUAD_NODES], fs[QUAD_NODES])
-    halves = [(a, mid, m.f, fs[:QUAD_NODES]), (m, b, fb, fs[QUAD_NODES + 1 :])]
-    parts = [_rules(e.t, end, e.f, inner, f_end) for e, end, f_end, inner in halves]
-    stalled = stalled + 1 if np.all(parts[0][1] + parts[1][1] > off / PROGRESS) else 0
-    if stalled >= STALLS:
-        return parts[0][0] + parts[1][0]  # noise: halving the width no longer helps
-    at = slice(QUAD_NODES, QUAD_NODES + 1)
-    finer = _known(rates, times[at], xs[at], again.tighter)[0]
-    first, second = (_bisected(again, rates, cap, finer, *h, stalled) for h in halves)
-    return first + second
-
-
-def _rules(
-    a: float, b: float, fa: np.ndarray, nodes: np.ndarray, fb: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """On [a, b]: the nodes' Gauss-Legendre sum, its difference from
-    Simpson's rule, and the largest |rate| seen (each (k,))."""
-    half = 0.5 * (b - a)
-    gauss = half * (_WEIGHTS @ nodes)
-    simpson = (half / 3.0) * (fa + 4.0 * nodes[_MID] + fb)
-    return gauss, np.abs(simpson - gauss), np.max(np.abs(np.vstack([fa, nodes, fb])), axis=0)
-
-
-def _inside(a: Any, b: Any) -> np.ndarray:
-    """The Gauss-Legendre nodes of [a, b] (floats, or columns (p, 1): (p,
-    QUAD_NODES)), with the same bits as 0.5 (a + b) at the middle, no overflow."""
-    return (0.5 * a + 0.5 * b) + 0.5 * (b - a) * _NODES
+def _times(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(p, 2 QUAD_NODES + 1): the sample times of pieces [a, b] (_NODES),
+    its ends exact, no overflow near DBL_MAX."""
+    times = (0.5 * a + 0.5 * b)[:, None] + (0.5 * (b - a))[:, None] * _NODES
+    times[:, 0], times[:, -1] = a, b
+    return np.clip(times, a[:, None], b[:, None])

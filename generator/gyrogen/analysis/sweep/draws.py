@@ -9,10 +9,11 @@ seed, gives trajectory i the 64-bit words of its counter blocks i * B to
 each word becomes a value through the inverse of its distribution's CDF
 (truncated: restricted to [F(lo), F(hi)]). One word per value, never a
 rejection loop, so no value depends on another trajectory, on the chunking,
-the worker count or the engine. A misaligned axis takes two words after the
+the worker count or the engine. A misalignment takes two words after the
 drawn variables': its tilt (the size of a draw from its cone's angle, in
-degrees) and the tilt's direction about the nominal axis (uniform), so it
-stays a unit vector.
+degrees) and the tilt's direction about the nominal axis (uniform), so the
+axis stays a unit vector; a gimbal's spin axis is turned by the same
+rotation as its gimbal axis, so the pair stays orthonormal.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtri
 
-from gyrogen.abi_rotors import AXIS, rotor_name
-from gyrogen.analysis.sweep.spec import Spec, rotor_of
+from gyrogen.analysis.sweep.spec import Spec, rotor_of, tilted_names
+from gyrogen.scene.rotors import gimbal_axes
 from gyrogen.sweep_values import Axis, Distribution, Misalignment
 
 WORDS_PER_BLOCK = 4
@@ -95,29 +96,50 @@ def drawn_values(spec: Spec, start: int, stop: int) -> dict[str, np.ndarray]:
     n = len(draws.variables)
     u = uniforms(draws.seed, start, stop, n + 2 * len(draws.misalign))
     out = {name: inverse_cdf(d, u[:, j]) for j, (name, d) in enumerate(draws.variables.items())}
-    base = spec.base_parameters()
     for j, (key, tilt) in enumerate(draws.misalign.items()):
-        names = [rotor_name(c, rotor_of(key)) for c in AXIS]
-        nominal = np.array([base[name] for name in names], dtype=np.float64)
-        g = tilted(nominal, tilt, u[:, n + 2 * j], u[:, n + 2 * j + 1])
-        out.update({name: g[:, i] for i, name in enumerate(names)})
+        turned = tilted(nominal(spec, key), tilt, u[:, n + 2 * j], u[:, n + 2 * j + 1])
+        for names, g in zip(tilted_names(key), turned, strict=True):
+            out.update({name: g[:, i] for i, name in enumerate(names)})
     return out
 
 
-def tilted(nominal: np.ndarray, tilt: Misalignment, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(n, 3) unit vectors: nominal normalized, turned by the angle |draw|
-    (quantile u of the cone's angle, degrees) toward the direction at angle
-    2 pi v about it (from e1, perpendicular to it in the plane of the
-    nominal and the axis of A it is least along, and e2 = g0 x e1)."""
-    g0 = nominal / np.sqrt(nominal @ nominal)
+def nominal(spec: Spec, key: str) -> list[np.ndarray]:
+    """The unit vectors a misalignment turns (tilted_names), from the base
+    parameters as setup makes them: an axis normalized; a gimbal's pair
+    orthonormal (gimbal_axes: g_g normalized, g_s0 made perpendicular to it)."""
+    base = spec.base_parameters()
+    kind, k = rotor_of(key)
+    if kind == "gimbal":
+        return list(gimbal_axes(spec.scene.rotors[k - 1], k, base))
+    (names,) = tilted_names(key)
+    g = np.array([base[name] for name in names], dtype=np.float64)
+    return [g / np.sqrt(g @ g)]
+
+
+def tilted(
+    nominal: Sequence[np.ndarray], tilt: Misalignment, u: np.ndarray, v: np.ndarray
+) -> list[np.ndarray]:
+    """(n, 3) unit vectors for each of nominal (unit vectors, the first g0
+    the cone's axis): g0 turned by the angle |draw| (quantile u of the
+    cone's angle, degrees) toward the direction side at angle 2 pi v about
+    it (from e1, perpendicular to it in the plane of g0 and the axis of A it
+    is least along, and e2 = g0 x e1); each other vector w by the same
+    rotation, about g0 x side: its parts a along g0 and b along side turn
+    in their plane, the rest stays."""
+    g0 = nominal[0]
     away = np.eye(3)[int(np.argmin(np.abs(g0)))]
     e1 = away - (away @ g0) * g0
     e1 /= np.sqrt(e1 @ e1)
     e2 = np.cross(g0, e1)
-    theta = np.radians(np.abs(inverse_cdf(tilt.cone, u)))
+    theta = np.radians(np.abs(inverse_cdf(tilt.cone, u)))[:, None]
     phi = 2.0 * np.pi * v
     side = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
-    return np.cos(theta)[:, None] * g0 + np.sin(theta)[:, None] * side
+    c, s = np.cos(theta), np.sin(theta)
+    out = [c * g0 + s * side]
+    for w in nominal[1:]:
+        a, b = (w @ g0), (side @ w)[:, None]
+        out.append(w + (c - 1.0) * (a * g0 + b * side) + s * (a * side - b * g0))
+    return out
 
 
 def _rows(values: Sequence[float], n: int) -> np.ndarray:

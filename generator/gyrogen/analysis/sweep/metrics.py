@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from gyrogen import methods
-from gyrogen.abi import ODE_LOG_FULL, unit_and_doc
+from gyrogen.abi import ODE_LOG_FULL
 from gyrogen.analysis.sweep.draws import inputs
 from gyrogen.analysis.sweep.spec import SAMPLED, THRESHOLD, Spec
 from gyrogen.oracle.reference import N_STATES, direction_cosines
@@ -125,7 +125,7 @@ def column_docs(spec: Spec) -> dict[str, tuple[str, str]]:
             docs[name] = ("1", f"{name} of the integrator (a fixed-step method's summed "
                           "over the samples' intervals)")  # fmt: skip
         elif name.startswith("final_"):
-            unit, doc = unit_and_doc(name[len("final_") :])
+            unit, doc = spec.scene.unit_and_doc(name[len("final_") :])
             docs[name] = (unit, f"final value (the last good one on failure) of: {doc}")
         elif name.startswith("first_") and name[len("first_") :] in located(spec):
             docs[name] = (
@@ -139,7 +139,7 @@ def column_docs(spec: Spec) -> dict[str, tuple[str, str]]:
             docs[name] = ("s", f"first time {name[len('time_to_') :]} crossed its threshold "
                           "(located; a fixed-step method's: the first sample past it)")  # fmt: skip
         else:
-            docs[name] = unit_and_doc(name)  # an input: a state or a runtime parameter
+            docs[name] = spec.scene.unit_and_doc(name)  # an input: a state or a runtime parameter
     return docs
 
 

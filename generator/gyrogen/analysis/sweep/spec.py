@@ -14,7 +14,9 @@ metrics to keep; validated like scenes (one line, exit 2, nothing written).
     [draws]                       # seed, count, NAME = { uniform | normal | lognormal = [a, b],
                                   #   truncate = [lo, hi] }
     [draws.misalign]              # axis_K = { angle = { distribution, degrees }, max_deg = 0.5 }:
-                                  #   rotor K's runtime axis tilted within a cone
+                                  #   rotor K's runtime axis tilted within a cone;
+                                  #   gimbal_K = { ... }: gimbal K's runtime axes, the pair
+                                  #   turned rigidly (its gimbal axis within the cone)
     [metrics]                     # keep = [...], samples, time_to = { QUANTITY = threshold }
     [criterion]                   # spin_stability = { grows_by = 10.0, band = 0.05 }
 
@@ -38,7 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictInt, field_validator, m
 
 from gyrogen import methods
 from gyrogen.abi import MIN_RTOL
-from gyrogen.abi_rotors import AXIS, axis_keys, rotor_name
+from gyrogen.abi_rotors import AXIS, GIMBAL_AXIS, axis_keys, rotor_name
 from gyrogen.errors import SceneError
 from gyrogen.limits import (
     MAX_SWEEP_CHUNK,
@@ -49,7 +51,7 @@ from gyrogen.physics import LUMPED_FROM, body_momentum, lumped_inertias
 from gyrogen.scene import Number, Scene, builtin_names, load_toml, one_line, read_file
 from gyrogen.scene import load as load_scene
 from gyrogen.scene.events import Event
-from gyrogen.scene.rotors import check_axis
+from gyrogen.scene.rotors import Rotor, check_axis, check_perpendicular
 from gyrogen.scene.rules import QUATERNION, check_angles, check_quaternion
 from gyrogen.setup_checks import first_failure
 from gyrogen.sweep_values import Axis, Distribution, Misalignment
@@ -78,8 +80,10 @@ class Draws(_Strict):
     variables: dict[str, Distribution] = Field(default_factory=dict)
     """Every other key of [draws]: NAME = distribution."""
     misalign: dict[str, Misalignment] = Field(default_factory=dict)
-    """axis_K = misalignment: rotor K's runtime axis tilted (g1_K..g3_K
-    drawn; their base values the nominal axis)."""
+    """<kind>_K = misalignment (kinds: MISALIGNED): rotor K's runtime axis
+    tilted (axis_K: g1_K..g3_K drawn), or gimbal K's pair of runtime axes
+    turned rigidly (gimbal_K: gg1_K..gg3_K and g1_K..g3_K drawn); their
+    base values the nominal axes."""
 
     @model_validator(mode="before")
     @classmethod
@@ -191,9 +195,9 @@ class Spec:
 
     @property
     def tilted(self) -> tuple[str, ...]:
-        """g1_K, g2_K, g3_K of each misaligned axis, in the order written."""
+        """The components each misalignment draws (tilted_names), in the order written."""
         misalign = self.sweep.draws.misalign if self.sweep.draws else {}
-        return tuple(rotor_name(key, rotor_of(name)) for name in misalign for key in AXIS)
+        return tuple(n for key in misalign for names in tilted_names(key) for n in names)
 
     def base_parameters(self) -> dict[str, float]:
         """The runtime parameters' values before the grid and the draws."""
@@ -360,35 +364,94 @@ def _check_variable(scene: Scene, key: str, name: str) -> None:
     )
 
 
-def rotor_of(key: str) -> int:
-    """K of a misalignment's key axis_K (0 when it is not of that form)."""
+MISALIGNED = {"axis": (AXIS,), "gimbal": (GIMBAL_AXIS, AXIS)}
+"""[draws.misalign]'s keys <kind>_K, and the runtime vectors of rotor K
+each kind turns (their keys in p[]): the first tilted within the cone, the
+others turned with it by the same rotation. gimbal_K turns a gimbal's axis
+g_g and its spin axis g_s0 at gimbal angle 0 as one rigid pair, so the
+pair stays orthonormal (setup refuses a spin axis tilted alone past
+GIMBAL_PERP_SLACK: code 10)."""
+
+
+def rotor_of(key: str) -> tuple[str, int]:
+    """(kind, K) of a misalignment's key <kind>_K, kind one of MISALIGNED
+    (("", 0) when it is not of that form)."""
     head, _, k = key.rpartition("_")
-    return int(k) if head == "axis" and k.isdigit() and k == str(int(k)) else 0
+    ok = head in MISALIGNED and k.isdigit() and k == str(int(k))
+    return (head, int(k)) if ok else ("", 0)
+
+
+def tilted_names(key: str) -> tuple[tuple[str, str, str], ...]:
+    """The p[] names of the vectors a misalignment's key turns (MISALIGNED):
+    ((g1_K, g2_K, g3_K),), or gimbal K's ((gg1_K..gg3_K), (g1_K..g3_K))."""
+    kind, k = rotor_of(key)
+    return tuple((rotor_name(a, k), rotor_name(b, k), rotor_name(c, k))
+                 for a, b, c in MISALIGNED[kind])  # fmt: skip
+
+
+def _misalignable(rotors: list[Rotor]) -> str:
+    """The misalignment keys of a scene's rotors: axis_K of a fixed rotor,
+    gimbal_K of one on a gimbal."""
+    keys = [f"{'axis' if r.gimbal is None else 'gimbal'}_{k}" for k, r in enumerate(rotors, 1)]
+    if len(keys) > 2 and len({key.rpartition("_")[0] for key in keys}) == 1:
+        return f"{keys[0]}..{keys[-1]}"
+    return ", ".join(keys) or "none: not a cluster"
 
 
 def _check_misalign(scene: Scene, sweep: Sweep) -> None:
-    """Each misaligned axis is a runtime axis of the scene, not also on the
-    grid or drawn, and its nominal value (the base parameters) a direction."""
+    """Each misalignment names a rotor of the scene by its kind (axis_K a
+    fixed rotor, gimbal_K one on a gimbal), whose vectors it turns are
+    runtime, not also on the grid or drawn, and nominally (the base
+    parameters) directions (a gimbal's pair perpendicular)."""
     if sweep.draws is None:
         return
     swept = set(sweep.grid) | set(sweep.draws.variables)
     base = {**scene.simulate.parameters, **sweep.parameters}
     for key in sweep.draws.misalign:
-        where, k = f"draws.misalign.{key}", rotor_of(key)
+        where, (kind, k) = f"draws.misalign.{key}", rotor_of(key)
         if not 1 <= k <= len(scene.rotors):
-            axes = f"axis_1..axis_{len(scene.rotors)}" if scene.rotors else "none: not a cluster"
-            raise ValueError(f"{where}: not a rotor axis of scene {scene.name} ({axes})")
-        if scene.rotors[k - 1].axis != "runtime":
             raise ValueError(
-                f"{where}: rotor {k}'s axis is folded into the code: make it "
-                '"runtime" in the scene to misalign it'
+                f"{where}: not a rotor axis of scene {scene.name} ({_misalignable(scene.rotors)})"
             )
-        names = [rotor_name(c, k) for c in AXIS]
+        _check_kind(scene.rotors[k - 1], kind, k, where)
+        names = [n for vector in tilted_names(key) for n in vector]
         both = [n for n in names if n in swept]
         if both:
             raise ValueError(f"{where}: {', '.join(both)} also on the grid or drawn")
-        if all(n in base for n in names):
-            check_axis(tuple(base[n] for n in names), f"{where}: nominal {axis_keys(k)}")  # type: ignore[arg-type]
+        if not all(n in base for n in names):
+            continue
+        vectors = [tuple(base[n] for n in vector) for vector in tilted_names(key)]
+        nominal = [f"{where}: nominal {axis_keys(k, keys)}" for keys in MISALIGNED[kind]]
+        for v, named in zip(vectors, nominal, strict=True):
+            check_axis(v, named)  # type: ignore[arg-type]
+        if kind == "gimbal":
+            check_perpendicular(vectors[1], vectors[0], nominal[0])  # type: ignore[arg-type]
+
+
+def _check_kind(rotor: Rotor, kind: str, k: int, where: str) -> None:
+    """axis_K on a fixed rotor with a runtime axis, gimbal_K on a gimbal
+    with both axes runtime."""
+    if kind == "axis" and rotor.gimbal is not None:
+        raise ValueError(
+            f"{where}: rotor {k} is on a gimbal, whose spin axis turns with its gimbal axis "
+            f"(tilted alone setup refuses it: code 10): misalign the pair with gimbal_{k}"
+        )
+    if kind == "gimbal" and rotor.gimbal is None:
+        raise ValueError(f"{where}: rotor {k} has no gimbal: misalign its axis with axis_{k}")
+    if kind == "axis" and rotor.axis != "runtime":
+        raise ValueError(
+            f"{where}: rotor {k}'s axis is folded into the code: make it "
+            '"runtime" in the scene to misalign it'
+        )
+    if kind == "gimbal":
+        axes = {"spin axis": rotor.axis, "gimbal axis": rotor.gimbal.axis}  # type: ignore[union-attr]
+        folded = [name for name, v in axes.items() if v != "runtime"]
+        if folded:
+            verb = "is" if len(folded) == 1 else "are"
+            raise ValueError(
+                f"{where}: rotor {k}'s {' and '.join(folded)} {verb} folded into the code: "
+                'make axis and gimbal.axis "runtime" in the scene to misalign the pair'
+            )
 
 
 def _check_names(scene: Scene, sweep: Sweep) -> None:

@@ -5,6 +5,10 @@ E = I/(h gamma) - J is block upper triangular in state order
 both it and the solve are unrolled over the entries of L and U that can be
 nonzero. An augmented system's rows that read x (Blocks.coupled) are solved
 after x, less those reads times x's solution, by their own blocks.
+The decompositions, their row exchanges and the solves touch only the
+entries Blocks.stored names, and lu_shift builds the iteration matrix
+d I - J there alone, not by a pass over all of J (the default scene's
+variational unit stores 283 entries of 3,600); over lanes, E is built whole.
 Matrices are flat and row-major, a[i*NX + j], in every target. U = D V is
 stored as 1/u_kk on the diagonal and V's u_kj/u_kk above it, so that each
 row of the back substitution waits on one multiply-add, not on a divide.
@@ -49,18 +53,23 @@ Entry = Callable[[int | E], E]
 """An entry's flat index (k * NX + j) -> its size, for the pivot search."""
 
 
-def swap_rows(names: tuple[str, ...], k: int, start: int) -> S:
-    """Rows k and p of each matrix exchanged, from the block's first column
-    (left of it both rows are zero)."""
-    body: list[S] = []
-    for a in names:
-        swap = Var("swap")
-        body += [
-            assign(swap, Var(a)[k * NX + j]),
-            assign(Var(a)[k * NX + j], Var(a)[p * NX + j]),
-            assign(Var(a)[p * NX + j], swap),
-        ]
-    return If(cmp(p, "!=", k), (For("j", NX, tuple(body), start=Int(start)),))
+def swap_rows(names: tuple[str, ...], k: int, blocks: Blocks, nx: int) -> S:
+    """Rows k and p of each matrix exchanged where the block's rows are
+    stored (Blocks.stored): its columns, as a loop, and U's beyond it; the
+    coupled ones stay (the solve reads them in the rows' first order)."""
+    s, e = blocks.start[k], blocks.end[k]
+    swap = Var("swap")
+
+    def exchange(a: Var, kj: E, pj: E) -> tuple[S, ...]:
+        return (assign(swap, a[kj]), assign(a[kj], a[pj]), assign(a[pj], swap))
+
+    arrays = [Var(a) for a in names]
+    block = tuple(st for a in arrays for st in exchange(a, k * NX + j, p * NX + j))
+    beyond = [c for c in blocks.upper[k] if c >= e]
+    return If(cmp(p, "!=", k), (
+        For("j", Int(e), block, start=Int(s)),
+        *(st for c in beyond for a in arrays for st in exchange(a, Int(k * nx + c), p * NX + c)),
+    ))  # fmt: skip
 
 
 Index = int | E
@@ -108,11 +117,11 @@ def eliminate(
         if looped and end - first > 2:
             k = Var("col")  # not k: over lanes, the stages' rows
             body.append(For("col", Int(end - 1),
-                            tuple(column(how, k, first, end, past, nx, singular)),
+                            tuple(column(how, k, first, end, past, nx, singular, blocks)),
                             start=Int(first)))  # fmt: skip
             columns = [end - 1]
         for c in columns:
-            body += column(how, c, first, end, past, nx, singular)
+            body += column(how, c, first, end, past, nx, singular, blocks)
     return tuple(body) if singular is not None else (*body, Return(Bool(False)))
 
 
@@ -131,6 +140,7 @@ def column(
     past: tuple[int, ...],
     nx: int,
     singular: Var | None,
+    blocks: Blocks,
 ) -> list[S]:
     """Column k of the block [first, end): its pivot, its multipliers and
     the updates of the rows below, row k of U scaled. A number k unrolls
@@ -152,7 +162,7 @@ def column(
         return [For("j", Int(end), f(j), start=after), *(st for c in past for st in f(c))]
 
     return [
-        *pivoting(how, k, first, end, singular),
+        *pivoting(how, k, (first, end), singular, blocks, nx),
         *how.inverse(kk),
         For("i", Int(end), (
             *how.multiplier(i * NX + k, kk),
@@ -170,11 +180,14 @@ def zero_pivot(size: E, singular: Var | None) -> S:
     return assign(singular, or_(singular, zero))
 
 
-def pivoting(how: Elimination, k: Index, start: int, end: int, singular: Var | None) -> list[S]:
+def pivoting(
+    how: Elimination, k: Index, span: tuple[int, int], singular: Var | None, blocks: Blocks, nx: int
+) -> list[S]:
     """Column k's pivot p, the largest of rows k..end-1 (the first of equal
     ones), into piv[k], and rows k and p exchanged. With singular, by
     selection: the running largest size in best (the size at p, as the
     search compares), and each row below k exchanged where it is p."""
+    start, end = span
     piv, after = Var("piv"), Int(k + 1) if isinstance(k, int) else k + 1
     if singular is None:
         assert isinstance(k, int), "a branching pivot search is unrolled"
@@ -184,7 +197,7 @@ def pivoting(how: Elimination, k: Index, start: int, end: int, singular: Var | N
                                    (assign(p, i),)),), start=Int(k + 1)),
             assign(piv[k], p),
             zero_pivot(how.size(p * NX + k), None),
-            swap_rows(how.names, k, start),
+            swap_rows(how.names, k, blocks, nx),
         ]  # fmt: skip
     best, q, swap = Var("best"), Var("q"), Var("held")
     larger = cmp(how.size(i * NX + k), ">", best)
@@ -227,6 +240,55 @@ def real(name: str) -> Elimination:
         update=lambda ij, kj: (assign(a[ij], a[ij] - m * a[kj]),),
         scale=lambda kj, kk: (assign(a[kj], a[kj] * a[kk]),),
     )
+
+
+def shift(blocks: Blocks, nx: int) -> Func:
+    """d I - J where lu_decompose reads it (Blocks.stored), J's other
+    entries being zero: the iteration matrix without a pass over all of J."""
+    J, d, a = Var("J"), Var("d"), Var("a")
+    body = tuple(
+        assign(a[q], d - J[q] if c == r else -J[q])
+        for r, cols in enumerate(blocks.stored)
+        for c in cols
+        for q in [r * nx + c]
+    )
+    params = (Decl("J", "double", ("NX2",)), Decl("d", "double"),
+              Decl("a", "double", ("NX2",), "out"))  # fmt: skip
+    doc = (
+        "a := d I - J at the entries lu_decompose and lu_solve read; J is zero",
+        "at the others, which they never touch.",
+    )
+    return Func("lu_shift", params, body, None, (), doc, restrict=True)
+
+
+def shift_complex(blocks: Blocks, nx: int) -> Func:
+    """lu_shift for (dr + i di) I - J, into ar + i ai; the coupled entries
+    are real, -J, and lu_solve_complex reads ar alone there."""
+    J, dr, di, ar, ai = (Var(n) for n in ("J", "dr", "di", "ar", "ai"))
+    coupled = blocks.coupled or tuple(() for _ in blocks.upper)
+    body = tuple(
+        st
+        for r, cols in enumerate(blocks.stored)
+        for c in cols
+        for q in [r * nx + c]
+        for st in (
+            (assign(ar[q], dr - J[q]), assign(ai[q], di))
+            if c == r
+            else (assign(ar[q], -J[q]),)
+            if c in coupled[r]
+            else (assign(ar[q], -J[q]), assign(ai[q], 0.0))
+        )
+    )
+    params = (
+        Decl("J", "double", ("NX2",)), Decl("dr", "double"), Decl("di", "double"),
+        Decl("ar", "double", ("NX2",), "out"), Decl("ai", "double", ("NX2",), "out"),
+    )  # fmt: skip
+    doc = (
+        "lu_shift for the complex matrix ar + i ai := (dr + i di) I - J; ai is",
+        "left as it is where the matrix is real, -J, for lu_solve_complex (a row's",
+        "reads of the state, in an augmented system).",
+    )
+    return Func("lu_shift_complex", params, body, None, (), doc, restrict=True)
 
 
 def decompose(blocks: Blocks, nx: int) -> Func:
@@ -393,24 +455,26 @@ def solve_complex(blocks: Blocks, nx: int) -> Func:
     ar, ai, br, bi, re = (Var(n) for n in ("ar", "ai", "br", "bi", "re"))
     body: list[S] = []
 
-    def minus(value: E, row: int, cols: list[int], part: str) -> E:
+    def minus(value: E, row: int, cols: list[int], part: str, real: bool = False) -> E:
         for c in cols:
             q = row * nx + c
-            if part == "re":
+            if real:
+                value = value - ar[q] * (br[c] if part == "re" else bi[c])
+            elif part == "re":
                 value = value - ar[q] * br[c] + ai[q] * bi[c]
             else:
                 value = value - ar[q] * bi[c] - ai[q] * br[c]
         return value
 
-    def forward(r: int, cols: list[int]) -> list[S]:
+    def forward(r: int, cols: list[int], real: bool = False) -> list[S]:
         if not cols:
             return []
-        return [assign(br[r], minus(br[r], r, cols, "re")),
-                assign(bi[r], minus(bi[r], r, cols, "im"))]  # fmt: skip
+        return [assign(br[r], minus(br[r], r, cols, "re", real)),
+                assign(bi[r], minus(bi[r], r, cols, "im", real))]  # fmt: skip
 
     for first, end in blocks.parts:
-        for r in range(first, end):  # the part's reads of x, solved already
-            body += forward(r, list(blocks.coupled[r]) if blocks.coupled else [])
+        for r in range(first, end):  # the part's reads of x (real: -J), solved already
+            body += forward(r, list(blocks.coupled[r]) if blocks.coupled else [], real=True)
         body += permute(blocks, range(first, end), (br, bi))
         for r in range(first, end):
             body += forward(r, blocks.lower[r])
@@ -486,6 +550,8 @@ __all__ = [
     "decompose_lanes",
     "lanes_state",
     "real",
+    "shift",
+    "shift_complex",
     "solve",
     "solve_complex",
     "solve_lanes",

@@ -185,6 +185,8 @@ def program(
     if blocks is not None:
         nx = len(blocks.end)
         candidates += [
+            linear.shift(blocks, nx),
+            linear.shift_complex(blocks, nx),
             linear.decompose(blocks, nx),
             linear.solve(blocks, nx),
             linear.decompose_complex(blocks, nx),

@@ -90,23 +90,17 @@ def pivots(name: str, intent: str = "in") -> Decl:
 def factor(m: Method) -> Func:
     R = m.tableau
     assert isinstance(R, Radau)
-    J, gamma_h, alpha_h = Var("J"), Var("gamma_h"), Var("alpha_h")
-    ii = i * NX + i
+    J = Var("J")
     body = (
-        assign(gamma_h, Num(R.gamma) / h),
-        assign(alpha_h, Num(R.alpha) / h),
-        For("i", Const("NX2"), (assign(e1[i], -J[i]), assign(e2r[i], -J[i]),
-                                assign(e2i[i], 0.0))),
-        each(assign(e1[ii], e1[ii] + gamma_h), assign(e2r[ii], e2r[ii] + alpha_h),
-             assign(e2i[ii], Num(R.beta) / h)),
+        Call("lu_shift", (J, Num(R.gamma) / h, e1)),
+        Call("lu_shift_complex", (J, Num(R.alpha) / h, Num(R.beta) / h, e2r, e2i)),
         If(fn("lu_decompose", e1, piv1), (Return(Bool(True)),)),
         Return(fn("lu_decompose_complex", e2r, e2i, piv2)),
     )  # fmt: skip
     params = (matrix("J"), scalar("h"), matrix("e1", "out"), pivots("piv1", "out"),
               matrix("e2r", "out"), matrix("e2i", "out"), pivots("piv2", "out"))  # fmt: skip
-    locals_ = (scalar("gamma_h", "inout"), scalar("alpha_h", "inout"))
     doc = ("E1 and E2 for this h, factored; 1 when either is singular.",)
-    return Func(f"{m.name}_factor", params, body, "bool", locals_, doc, inline=True)
+    return Func(f"{m.name}_factor", params, body, "bool", (), doc, inline=True)
 
 
 def newton(m: Method) -> Func:

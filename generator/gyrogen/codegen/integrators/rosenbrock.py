@@ -218,7 +218,8 @@ def integrate(
         assign(last, driver.last_step()),
         If(last, (assign(h, t1 - t),)),
         assign(driver.stat("h"), h),
-        *matrix(R),
+        Comment("E = I/(h gamma) - J"),
+        Call("lu_shift", (J, Num(1.0) / (h * Num(R.gamma)), lu)),
         driver.count("decompositions", 1),
         If(fn("lu_decompose", lu, piv), (
             *reject, *driver.singular_stop(singular, ctl.singular_tries),
