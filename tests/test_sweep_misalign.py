@@ -148,18 +148,23 @@ BAD = [
 ]  # fmt: skip
 
 
+def refused(cli, path: Path, out: Path, case: str, message: str) -> None:
+    """`gyrogen sweep path` refused: exit 2, one line naming the file and
+    saying message, nothing written."""
+    code, stdout, err = cli(["sweep", str(path), "--out", str(out)])
+    assert code == 2, (case, err)
+    assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: "), err
+    assert message in err, err
+    assert not out.exists() and stdout == ""
+
+
 @pytest.mark.parametrize(("case", "text", "message"), BAD, ids=[b[0] for b in BAD])
 def test_bad_misalignment_is_one_line_exit_2_nothing_written(
     case: str, text: str, message: str, tmp_path: Path, cli
 ) -> None:
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    out = tmp_path / "out"
-    code, stdout, err = cli(["sweep", str(path), "--out", str(out)])
-    assert code == 2, (case, err)
-    assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: "), err
-    assert message in err, err
-    assert not out.exists() and stdout == ""
+    refused(cli, path, tmp_path / "out", case, message)
 
 
 HOSTILE = st.one_of(
@@ -431,12 +436,7 @@ def test_bad_gimbal_misalignment_is_one_line_exit_2_nothing_written(
     assert old in text
     path = tmp_path / "bad.toml"
     path.write_text(text.replace(old, new))
-    out = tmp_path / "out"
-    code, stdout, err = cli(["sweep", str(path), "--out", str(out)])
-    assert code == 2, (case, err)
-    assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: "), err
-    assert message in err, err
-    assert not out.exists() and stdout == ""
+    refused(cli, path, tmp_path / "out", case, message)
 
 
 @pytest.mark.slow
