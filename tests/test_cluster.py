@@ -259,3 +259,24 @@ def test_the_jacobian_is_not_compared_across_a_torque_clamp(tmp_path: Path) -> N
     assert jacobian_error(jac, f, x[None], p) > JAC_TOLERANCE
     kinks = lambda xs, q: scene_view.kinks(scene, xs, q)  # noqa: E731
     assert jacobian_error(jac, f, x[None], p, kinks) < 1e-9
+
+
+def test_the_reference_jacobian_allows_for_the_rounding_of_its_differences() -> None:
+    """f = 1e18 + 1010 x: a step of 2e-3 changes f by 2, below f's rounding
+    (128), so the central difference is 0 or noise. A wheel at 1e9 rad/s
+    makes such rows, and verify refused the exact Jacobian (error 5 above
+    its 1e-6 bar) as the code's fault; the rounding is the differences'
+    own error. Where f is of the size of its changes, a wrong entry fails."""
+    from gyrogen.oracle.compare import JAC_TOLERANCE, jacobian_error
+
+    def f(xs: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return 1e18 + 1010.0 * xs
+
+    x = np.array([[1e3]])
+    assert jacobian_error(np.array([[[1010.0]]]), f, x, np.array([])) < JAC_TOLERANCE
+
+    def small(xs: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return 3.0 + 1010.0 * xs
+
+    assert jacobian_error(np.array([[[1010.0]]]), small, x, np.array([])) < 1e-9
+    assert jacobian_error(np.array([[[2020.0]]]), small, x, np.array([])) > JAC_TOLERANCE

@@ -15,7 +15,9 @@ a second group with ill-conditioned carriers (a tiny carrier with a heavy
 offset rotor is nearly a dumbbell) is held to 1000 cond(M) eps.
 
 The Jacobian is compared with central differences of the reference's rhs,
-to JAC_TOLERANCE of its row's sizes (a wrong entry is wrong by O(1)).
+to JAC_TOLERANCE of its row's sizes (a wrong entry is wrong by O(1)), with
+slack for the differences' own error: their change with the step, and the
+rounding of f's values (ROUNDING eps |f| / h).
 """
 
 from __future__ import annotations
@@ -43,6 +45,9 @@ STEP = 1e-6
 WELL_CONDITIONED = 100.0
 ILL_CONDITIONED_ULPS = 1000.0
 EPS = float(np.finfo(float).eps)
+ROUNDING = 16.0
+"""The Jacobian's slack for the rounding of the central differences, in
+units of eps |f| / h (a few roundings of each of f's terms)."""
 
 Progress = Callable[[str, Iterable[np.ndarray]], Iterable[np.ndarray]]
 """(label, parameter sets) -> the same sets, reporting progress as they go."""
@@ -148,11 +153,14 @@ class ReferenceJacobian:
     def of(
         cls, f: Function, states: np.ndarray, p: np.ndarray, kinks: Function | None = None
     ) -> ReferenceJacobian:
-        fine, coarse = _differences(f, states, p, 1.0), _differences(f, states, p, 2.0)
+        (fine, noise), (coarse, _) = (
+            _differences(f, states, p, 1.0),
+            _differences(f, states, p, 2.0),
+        )
         rows = 1.0 + np.sum(
             np.abs(fine) * (1.0 + np.abs(states[:, None, :])), axis=2, keepdims=True
         )
-        slack = np.abs(fine - coarse) / JAC_TOLERANCE
+        slack = (np.abs(fine - coarse) + ROUNDING * noise) / JAC_TOLERANCE
         smooth = None if kinks is None else _smooth(kinks, states, p)[:, None, :]
         return cls(fine, rows + slack, smooth)
 
@@ -184,12 +192,19 @@ def _smooth(kinks: Function, states: np.ndarray, p: np.ndarray) -> np.ndarray:
     return (same[: len(h)] & same[len(h) :]).T
 
 
-def _differences(f: Function, states: np.ndarray, p: np.ndarray, scale: float) -> np.ndarray:
+def _differences(
+    f: Function, states: np.ndarray, p: np.ndarray, scale: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Central differences (n, m, nx), and what rounding alone may make of
+    each: eps (|f(x + h)| + |f(x - h)|) / 2h. Where f's terms are far larger
+    than a step changes them (a wheel at 1e9 rad/s), the difference of two
+    rounded values is that noise, not the derivative."""
     up, down, h = _shifts(states, scale)
     nx = len(h)
     both = _stacked(f, np.concatenate([up, down]), p)  # (2 nx, n, m)
     fd = (both[:nx] - both[nx:]) / (2.0 * h[:, :, None])  # (nx, n, m)
-    return fd.transpose(1, 2, 0)
+    noise = EPS * (np.abs(both[:nx]) + np.abs(both[nx:])) / (2.0 * h[:, :, None])
+    return fd.transpose(1, 2, 0), noise.transpose(1, 2, 0)
 
 
 @dataclass(frozen=True)
