@@ -312,6 +312,14 @@ def test_dt_longer_than_span_is_a_usage_error(tmp_path: Path, cli) -> None:
         "gyrogen simulate: error: Invalid value for '--t-end': output step 0.01 s is longer "
         "than the span 0.001 s (see --help)\n"
     )
+    short = tmp_path / "short.toml"  # the scene's t_end, with no dt: the default's 0.01 s
+    short.write_text(builtin_text("torque_free").replace("dt = 0.01\n", "")
+                     .replace("t_end = 20.0", "t_end = 0.001"))  # fmt: skip
+    run = simulate(cli, [str(short)], tmp_path / "out")
+    assert run.code == 2 and run.err == (
+        "gyrogen simulate: error: Invalid value for the scene's [simulate] t_end with dt's "
+        "default (give --dt): output step 0.01 s is longer than the span 0.001 s (see --help)\n"
+    )
 
 
 @pytest.mark.parametrize("dt", ["5e-324", "1e-310", "9e-301"])

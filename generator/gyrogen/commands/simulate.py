@@ -81,9 +81,10 @@ def simulate(
     )
     try:
         check_output_grid(settings.t_end, settings.dt)
-    except ValueError as exc:  # the scene's own pair passed: an option is to blame
+    except ValueError as exc:  # an option, or the scene's t_end beside the default dt
         given = [f"'{n}'" for n, v in (("--t-end", t_end), ("--dt", dt)) if v is not None]
-        raise click.BadParameter(str(exc), param_hint=" / ".join(given)) from exc
+        hint = " / ".join(given) or "the scene's [simulate] t_end with dt's default (give --dt)"
+        raise click.BadParameter(str(exc), param_hint=hint) from exc
     out = out or Path("sim") / scene.name
     echo = lambda s: click.echo(s, err=True)  # noqa: E731
     result = sim.run(scene, out, settings, progress=time_bar, echo=echo)
