@@ -10,8 +10,6 @@ the scene defines it (Rotor.spin_axis).
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
 from gyrogen.abi_rotors import GIMBAL_KEYS, rotor_name
@@ -46,11 +44,19 @@ def _axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
     return g / np.linalg.norm(g)
 
 
-@lru_cache(maxsize=256)
 def _spin_axis(r: Rotor) -> tuple[float, ...]:
     """Rotor.spin_axis in floats, its exact rationals computed once per rotor
-    (values is asked for at every call of the reference)."""
-    return tuple(float(x) for x in r.spin_axis)
+    (values is asked for at every call of the reference). Keyed by the
+    rotor's dump: a rotor holding a list (a torque table) is no hash key."""
+    key = r.model_dump_json()
+    if key not in _SPIN_AXES:
+        if len(_SPIN_AXES) >= 256:
+            _SPIN_AXES.clear()
+        _SPIN_AXES[key] = tuple(float(x) for x in r.spin_axis)
+    return _SPIN_AXES[key]
+
+
+_SPIN_AXES: dict[str, tuple[float, ...]] = {}
 
 
 def _gimbal_axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
