@@ -36,27 +36,12 @@ def _axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
     both axes folded, Rotor.spin_axis; else the given spin axis less its
     part along the unit gimbal axis, normalized."""
     if r.gimbal is not None and "runtime" not in (r.axis, r.gimbal.axis):
-        return np.array(_spin_axis(r))
+        return np.array([float(x) for x in r.spin_axis])
     g = _raw(r.axis, "g", k, runtime)
     if r.gimbal is not None:
         g_g = _gimbal_axis(r, k, runtime)
         g = g - np.dot(g, g_g) * g_g
     return g / np.linalg.norm(g)
-
-
-def _spin_axis(r: Rotor) -> tuple[float, ...]:
-    """Rotor.spin_axis in floats, its exact rationals computed once per rotor
-    (values is asked for at every call of the reference). Keyed by the
-    rotor's dump: a rotor holding a list (a torque table) is no hash key."""
-    key = r.model_dump_json()
-    if key not in _SPIN_AXES:
-        if len(_SPIN_AXES) >= 256:
-            _SPIN_AXES.clear()
-        _SPIN_AXES[key] = tuple(float(x) for x in r.spin_axis)
-    return _SPIN_AXES[key]
-
-
-_SPIN_AXES: dict[str, tuple[float, ...]] = {}
 
 
 def _gimbal_axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:

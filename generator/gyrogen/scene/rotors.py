@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from fractions import Fraction
+from functools import cached_property
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -288,11 +289,12 @@ class Rotor(BaseModel):
                 raise ValueError(f"torque = {self.torque!r} needs {key}")
         return self
 
-    @property
+    @cached_property
     def spin_axis(self) -> tuple[Fraction, Fraction, Fraction]:
         """The spin axis exactly: unit_axis, or on a gimbal g_s0 exactly
         perpendicular to the gimbal axis (exact_perpendicular); with either
-        axis runtime there is none here (setup makes the pair: gimbal_axes)."""
+        axis runtime there is none here (setup makes the pair: gimbal_axes).
+        Computed once per rotor (the reference asks for it at every call)."""
         if self.gimbal is None:
             return self.unit_axis
         if self.axes_at_runtime:
