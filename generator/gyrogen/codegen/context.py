@@ -215,6 +215,7 @@ class SceneContext:
             self.event_grid,
             self.measured,
             self.kinds,
+            self.scene.table_times,
         )
 
     @property

@@ -134,11 +134,8 @@ def rhs(scene: Scene, xs: np.ndarray, p_runtime: np.ndarray, t: float = 0.0) -> 
 
 
 def table_times(scene: Scene) -> np.ndarray:
-    """The sorted times of every T(t) table's points (the single rotor's,
-    each wheel's, each gimbal's): where a tabulated torque's slope jumps."""
-    tables = [scene.effects.torque_table, *(r.torque_table for r in scene.rotors)]
-    tables += [r.gimbal.torque_table for r in scene.rotors if r.gimbal is not None]
-    return np.unique([float(t) for table in tables if table for t, _ in table])
+    """Scene.table_times as an array."""
+    return np.array(scene.table_times, dtype=float)
 
 
 def _body_rates(scene: Scene) -> list[int]:

@@ -294,6 +294,16 @@ class Scene(_Strict):
         object.__setattr__(self, "integrators", kept)  # the default, for this scene
 
     @property
+    def table_times(self) -> tuple[float, ...]:
+        """The sorted times of every T(t) table's points (the single rotor's,
+        each wheel's, each gimbal's): where a tabulated torque's slope jumps,
+        and where the compiled integrators end a step (a step across one
+        could pass a pulse narrower than itself)."""
+        tables = [self.effects.torque_table, *(r.torque_table for r in self.rotors)]
+        tables += [r.gimbal.torque_table for r in self.rotors if r.gimbal is not None]
+        return tuple(sorted({float(t) for table in tables if table for t, _ in table}))
+
+    @property
     def not_smooth(self) -> str | None:
         """Why the rhs is not smooth everywhere (a piecewise-linear torque
         table, a clamped motor torque), or None."""

@@ -604,9 +604,72 @@ def stop_code(nonfinite: Var) -> E:
     return sel(lost, underflow_code(nonfinite), sel(spent(), ERR_MAX_STEPS, GOING_ON))
 
 
-def last_step(step: E = h) -> E:
-    """A step of step from t ends on t1 (within registry.LAST_STEP_SLACK)."""
-    return cmp(t + Num(registry.LAST_STEP_SLACK) * step, ">=", t1)
+def last_step(step: E = h, end: E = t1) -> E:
+    """A step of step from t ends on end, t1 unless given (within
+    registry.LAST_STEP_SLACK)."""
+    return cmp(t + Num(registry.LAST_STEP_SLACK) * step, ">=", end)
+
+
+# The table times a step stops at
+
+Knots = tuple[float, ...]
+"""The scene's table times (Scene.table_times): no step crosses one inside
+(t0, t1), or it could pass a pulse narrower than itself with no error
+estimate to see it (a 0.2 ms pulse among steps of seconds). Empty for a
+scene without tables, whose loops print as they would without them."""
+KNOTS, TK = Var("knots"), Var("tk")
+
+
+def knot_doc(knots: Knots) -> tuple[str, ...]:
+    """What a function that stops at the table times says of it."""
+    if not knots:
+        return ()
+    return ("No step crosses a torque table's time inside (t0, t1): one that would",
+            "ends on it instead, so that no pulse narrower than a step is passed.")  # fmt: skip
+
+
+def knot_locals(knots: Knots) -> tuple[Decl, ...]:
+    """The table times (a constant table) and tk, the next one a step stops at."""
+    if not knots:
+        return ()
+    return (Decl("knots", "double", (len(knots),), values=knots), real("tk", "inout"))
+
+
+def next_knot(knots: Knots) -> list[S]:
+    """tk := the first table time after t that a step can reach (one lost
+    in the rounding of t is passed: a step ends on a time to within an ulp),
+    else t1; a forward scan of the sorted times, by selection."""
+    if not knots:
+        return []
+    k = Var("kt")
+    after = and_(cmp(KNOTS[k], "<", TK), not_(fn("step_underflow", KNOTS[k] - t, t)))
+    return [
+        assign(TK, t1),
+        For("kt", Int(len(knots)), (assign(TK, sel(after, KNOTS[k], TK)),)),
+    ]
+
+
+def reaches_knot(step: E = h) -> E:
+    """A step of step from t ends on tk, or past it (last_step's slack)."""
+    return last_step(step, TK)
+
+
+def final_step(knots: Knots, step: E = h) -> E:
+    """A step of step from t is the last (last_step), unless it reaches a
+    table time before t1 (tk < t1, after next_knot): it then ends there."""
+    if not knots:
+        return last_step(step)
+    return and_(last_step(step), cmp(TK, ">=", t1))
+
+
+def knot_clip(knots: Knots, last: E, go: E | None = None) -> list[S]:
+    """After next_knot and the last step's h: a step that is not the last
+    and reaches tk ends on tk, h := tk - t (where go, a step taken on this
+    lane)."""
+    if not knots:
+        return []
+    reach = and_(*([] if go is None else [go]), not_(last), reaches_knot())
+    return [assign(h, sel(reach, TK - t, h))]
 
 
 def ended(attitude: E, ok: E, last: E, cd: Var) -> E:

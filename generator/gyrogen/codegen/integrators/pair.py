@@ -104,12 +104,16 @@ def grid_krows(m: Method, krows: int) -> int:
 
 
 def parts(
-    m: Method, quaternion: bool, grid: bool | driver.Grid = False, row: E = driver.G
+    m: Method,
+    quaternion: bool,
+    grid: bool | driver.Grid = False,
+    row: E = driver.G,
+    knots: driver.Knots = (),
 ) -> tuple[list[S], list[S]]:
     """One step of pair m on one trajectory, as the five parts: begin, and
     the other four. grid: the output grid's too (grid_step, f at the last
     step's end, and the grid times an accepted step passes; row: out's row
-    of grid time g)."""
+    of grid time g). knots: the table times a step ends on (driver.knot_clip)."""
     ctl = m.control
     assert isinstance(ctl, registry.PairControl)
     tab = m.tableau
@@ -119,8 +123,10 @@ def parts(
     begin: list[S] = [
         Comment("begin: a step size lost in t, or no steps left, stops; a last step ends on t1"),
         assign(cd, sel(cmp(cd, "<", 0), driver.stop_code(nonfinite), cd)),
-        assign(last, driver.last_step()),
+        *driver.next_knot(knots),
+        assign(last, driver.final_step(knots)),
         assign(h, sel(and_(cmp(cd, "<", 0), last), t1 - t, h)),
+        *driver.knot_clip(knots, last, cmp(cd, "<", 0)),
         assign(driver.stat("h"), sel(cmp(cd, "<", 0), h, driver.stat("h"))),
         *(driver.grid_step(t, h) if grid else []),
     ]
@@ -205,16 +211,23 @@ def start_state() -> list[S]:
     return [*common.start_state(), *driver.PI.start()]
 
 
-def integrate(m: Method, quaternion: bool, krows: int, grid: bool | driver.Grid = False) -> Func:
+def integrate(
+    m: Method,
+    quaternion: bool,
+    krows: int,
+    grid: bool | driver.Grid = False,
+    knots: driver.Knots = (),
+) -> Func:
     """m.name_integrate: pair m from t0 to t1 on one trajectory; with grid,
     m.name_grid: over the output grid."""
-    begin, rest = parts(m, quaternion, grid)
+    begin, rest = parts(m, quaternion, grid, knots=knots)
     cd = Var("code")
     stop = driver.stopped(cd)
     start = driver.started(m, Row("k", Int(0)), cd, grid)
     body = [*start, *start_state(), Loop((*begin, stop, *rest, stop))]
     rows = grid_krows(m, krows) if grid else krows
-    locals_ = (*state_arrays(rows)[1:], *(declare(n) for n in STATE), *used_locals(begin + rest))
+    locals_ = (*state_arrays(rows)[1:], *(declare(n) for n in STATE), *used_locals(begin + rest),
+               *driver.knot_locals(knots))  # fmt: skip
     if grid:
         locals_ += (driver.rows("dense", dense_rows(m)), *driver.grid_locals(body, grid))
     doc = (
@@ -222,6 +235,7 @@ def integrate(m: Method, quaternion: bool, krows: int, grid: bool | driver.Grid 
         "to end on t1, no growth right after a rejection, and a non-finite trial",
         "rejected with h shrunk by facmin.",
         *((m.control.note,) if isinstance(m.control, registry.PairControl) else ()),
+        *driver.knot_doc(knots),
     )
     if grid:
         doc = (*doc, *driver.GRID_DOC)
@@ -230,18 +244,17 @@ def integrate(m: Method, quaternion: bool, krows: int, grid: bool | driver.Grid 
     return Func(f"{m.name}_integrate", driver.PARAMS, tuple(body), "int", locals_, doc)
 
 
-def lanes_step(m: Method, quaternion: bool, grid: bool = False) -> Func:
+def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Knots = ()) -> Func:
     """m.name_step_lanes: one step of every lane of a struct lanes; with
     grid, m.name_grid_step_lanes: one step of m.name_grid (its grid and
     dense rows in the struct, driver.lane_grid_state)."""
-    begin, rest = parts(m, quaternion, grid, driver.BASE + driver.G)
+    begin, rest = parts(m, quaternion, grid, driver.BASE + driver.G, knots)
     step = begin + rest
     if not grid:
         doc = (f"One step of {m.name}_integrate on every lane.",)
-        return Func(
-            f"{m.name}_step_lanes", driver.LANE_PARAMS, tuple(step), None, used_locals(step), doc
-        )
-    locals_ = (*used_locals(step), *driver.lane_grid_locals(step))
+        locals_ = (*used_locals(step), *driver.knot_locals(knots))
+        return Func(f"{m.name}_step_lanes", driver.LANE_PARAMS, tuple(step), None, locals_, doc)
+    locals_ = (*used_locals(step), *driver.knot_locals(knots), *driver.lane_grid_locals(step))
     doc = (f"One step of {m.name}_grid on every lane.",)
     return Func(f"{m.name}_grid_step_lanes", driver.LANE_PARAMS, tuple(step), None, locals_, doc)
 

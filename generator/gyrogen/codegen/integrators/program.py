@@ -49,6 +49,8 @@ class Given:
     """The scene's events: each adaptive method's _events twin besides."""
     blocks: Blocks | None = None
     """The Jacobian's diagonal blocks (the implicit methods' LU)."""
+    knots: driver.Knots = ()
+    """The scene's table times, which no adaptive step crosses."""
 
 
 @dataclass(frozen=True)
@@ -71,11 +73,14 @@ def _pair(m: Method, g: Given) -> Parts:
     common_start = common.start_state()
     return Parts(
         [
-            pair.integrate(m, g.quaternion, g.krows),
-            pair.integrate(m, g.quaternion, g.krows, True),
-            *([pair.integrate(m, g.quaternion, g.krows, g.events)] if g.events else []),
+            pair.integrate(m, g.quaternion, g.krows, knots=g.knots),
+            pair.integrate(m, g.quaternion, g.krows, True, g.knots),
+            *([pair.integrate(m, g.quaternion, g.krows, g.events, g.knots)] if g.events else []),
         ],
-        [pair.lanes_step(m, g.quaternion), pair.lanes_step(m, g.quaternion, grid=True)],
+        [
+            pair.lanes_step(m, g.quaternion, knots=g.knots),
+            pair.lanes_step(m, g.quaternion, True, g.knots),
+        ],
         init=[s for s in pair.start_state() if s not in common_start],
     )
 
@@ -86,13 +91,17 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
         [
             rosenbrock.trial(m, g.uses_time),
             rosenbrock.trial(m, g.uses_time, grid=True),
-            rosenbrock.integrate(m, g.quaternion, g.uses_time),
-            rosenbrock.integrate(m, g.quaternion, g.uses_time, grid=True),
-            *([rosenbrock.integrate(m, g.quaternion, g.uses_time, g.events)] if g.events else []),
+            rosenbrock.integrate(m, g.quaternion, g.uses_time, knots=g.knots),
+            rosenbrock.integrate(m, g.quaternion, g.uses_time, True, g.knots),
+            *(
+                [rosenbrock.integrate(m, g.quaternion, g.uses_time, g.events, g.knots)]
+                if g.events
+                else []
+            ),
         ],
         [
-            rosenbrock.lanes_step(m, g.quaternion, g.uses_time),
-            rosenbrock.lanes_step(m, g.quaternion, g.uses_time, grid=True),
+            rosenbrock.lanes_step(m, g.quaternion, g.uses_time, knots=g.knots),
+            rosenbrock.lanes_step(m, g.quaternion, g.uses_time, True, g.knots),
         ],
         rosenbrock.lane_state(m, g.uses_time),
         rosenbrock.lane_start(m),
@@ -105,9 +114,9 @@ def _radau(m: Method, g: Given) -> Parts:
             radau.factor(m),
             radau.newton(m),
             radau.error(m),
-            radau_step.integrate(m, g.quaternion),
-            radau_step.integrate(m, g.quaternion, grid=True),
-            *([radau_step.integrate(m, g.quaternion, g.events)] if g.events else []),
+            radau_step.integrate(m, g.quaternion, knots=g.knots),
+            radau_step.integrate(m, g.quaternion, True, g.knots),
+            *([radau_step.integrate(m, g.quaternion, g.events, g.knots)] if g.events else []),
         ]
     )
 
@@ -161,14 +170,16 @@ def program(
     events: driver.Grid | None = None,
     measured: int | None = None,
     kinds: Sequence[StateKind] = (),
+    knots: driver.Knots = (),
 ) -> Program:
     """The methods' functions, the lanes' and the shared ones they call;
     measured: how many leading states the error norms measure (all: None);
     kinds: each state's (abi_groups.state_kind), the error scales' caps
-    (common.angle_table, declared by each function that reads it)."""
+    (common.angle_table, declared by each function that reads it); knots:
+    the scene's table times, which no adaptive step crosses (driver.Knots)."""
     pairs = [m for m in methods if m.pair]
     krows = explicit.rows(pairs) if pairs else 0
-    given = Given(quaternion, uses_time, krows, jet, events, blocks)
+    given = Given(quaternion, uses_time, krows, jet, events, blocks, knots)
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
     single = [f for p in parts for f in p.single]
     lanes = [f for p in parts for f in p.lanes]

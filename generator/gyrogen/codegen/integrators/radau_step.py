@@ -67,9 +67,12 @@ def collocation(R: Radau) -> driver.Interpolant:
     return driver.Interpolant((), driver.by_state(value), at_end=True)
 
 
-def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> Func:
+def integrate(
+    m: Method, quaternion: bool, grid: bool | driver.Grid = False, knots: driver.Knots = ()
+) -> Func:
     """m.name_integrate, or with grid m.name_grid (the states at the grid's
-    times, from the collocation polynomial)."""
+    times, from the collocation polynomial); knots: the table times a step
+    ends on (an h kept for its LU too)."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Radau) and isinstance(ctl, RadauControl)
     v = V
@@ -176,6 +179,7 @@ def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> 
     ak = v["ak"]
     keep = and_(cmp(theta, "<=", ctl.jacobian_reuse), cmp(h_new, ">=", Num(ctl.keep_h[0]) * h),
                 cmp(h_new, "<=", Num(ctl.keep_h[1]) * h))  # fmt: skip
+    kept = and_(keep, not_(driver.reaches_knot())) if knots else keep  # h and its LU kept
     interpolant: list[S] = [  # the collocation polynomial, the next Newton iterations' start
         assign(v["h_old"], h),
         each(
@@ -196,8 +200,9 @@ def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> 
         assign(h_new, fn("min", h_new, v["t1"] - v["t0"])),
         If(v["reject"], (assign(h_new, fn("min", h_new, h)),)),
         assign(v["reject"], False),
-        If(driver.last_step(h_new), (assign(h, v["t1"] - t), assign(last, True)), (
-            If(keep, (Continue(),), (assign(h, h_new),)),)),
+        *driver.next_knot(knots),
+        If(driver.final_step(knots, h_new), (assign(h, v["t1"] - t), assign(last, True)), (
+            If(kept, (Continue(),), (assign(h, h_new),)), *driver.knot_clip(knots, last))),
         assign(v["need_lu"], True),
         assign(v["need_jac"], cmp(theta, ">", ctl.jacobian_reuse)),
     ]  # fmt: skip
@@ -242,7 +247,9 @@ def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> 
         assign(v["atol_e"], v["rtol_e"] * (Var("atol") / Var("rtol"))),
         assign(v["newton_tol"], fn("max", Num(ctl.newton_tol[0]) * EPS / v["rtol_e"],
                                    fn("min", ctl.newton_tol[1], fn("sqrt", v["rtol_e"])))),
-        If(driver.last_step(), (assign(h, v["t1"] - t), assign(last, True))),
+        *driver.next_knot(knots),
+        If(driver.final_step(knots), (assign(h, v["t1"] - t), assign(last, True))),
+        *driver.knot_clip(knots, last),
         each(assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * size(i, x))),
         Loop(tuple(loop)),
     )  # fmt: skip
@@ -259,6 +266,7 @@ def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> 
         *(scalar(n, "inout") for n in doubles), *(Decl(n, "bool") for n in bools),
         *(Decl(n, "int") for n in ("newt", "outcome", "singular", "start")),
         *(driver.grid_locals(body, grid) if grid else ()),
+        *driver.knot_locals(knots),
     )  # fmt: skip
     doc = (
         f"{m.doc} Hairer's radau5.f strategy: the error test's tolerances are",
@@ -271,6 +279,7 @@ def integrate(m: Method, quaternion: bool, grid: bool | driver.Grid = False) -> 
         f" iterations that diverge, take more than {ctl.newton_max}, or meet a NaN or Inf",
         f"retry with h halved (slow ones with a smaller h); a singular E1 or E2 too,"
         f" {ctl.singular_tries} times in a row at most.",
+        *driver.knot_doc(knots),
     )
     if grid:
         return Func(

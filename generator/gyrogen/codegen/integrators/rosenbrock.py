@@ -188,10 +188,14 @@ def matrix(R: Rosenbrock) -> list[S]:
 
 
 def integrate(
-    m: Method, quaternion: bool, uses_time: bool, grid: bool | driver.Grid = False
+    m: Method,
+    quaternion: bool,
+    uses_time: bool,
+    grid: bool | driver.Grid = False,
+    knots: driver.Knots = (),
 ) -> Func:
     """m.name_integrate, or with grid m.name_grid (the states at the grid's
-    times, from the interpolant)."""
+    times, from the interpolant); knots: the table times a step ends on."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Rosenbrock) and isinstance(ctl, registry.RosenbrockControl)
     J, lu, piv, fnew, t1 = (Var(n) for n in ("J", "lu", "piv", "fnew", "t1"))
@@ -215,8 +219,10 @@ def integrate(
     loop: list[S] = [
         If(new_point, (*point, assign(new_point, False))),
         *driver.stop_tests(nonfinite),
-        assign(last, driver.last_step()),
+        *driver.next_knot(knots),
+        assign(last, driver.final_step(knots)),
         If(last, (assign(h, t1 - t),)),
+        *driver.knot_clip(knots, last),
         assign(driver.stat("h"), h),
         Comment("E = I/(h gamma) - J"),
         Call("lu_shift", (J, Num(1.0) / (h * Num(R.gamma)), lu)),
@@ -252,7 +258,7 @@ def integrate(
         *(arr(n, "inout") for n in ["f0", "fnew", "xnew", "dx", "comp"] + ["ft"] * uses_time),
         Decl("piv", "int", ("NX",), "inout"), *(real(n, "inout") for n in doubles),
         *(Decl(n, "bool") for n in ("last", "rejected_last", "nonfinite", "new_point")),
-        Decl("singular", "int"), Decl("start", "int"),
+        Decl("singular", "int"), Decl("start", "int"), *driver.knot_locals(knots),
         *((driver.rows("dense", len(R.dense)), *driver.grid_locals(body, grid)) if grid else ()),
     )  # fmt: skip
     doc = (
@@ -263,6 +269,7 @@ def integrate(
         " predictive controller after an accepted step.",
         f"A singular E is retried with h times {ctl.singular_shrink:g},"
         f" {ctl.singular_tries} times in a row at most.",
+        *driver.knot_doc(knots),
     )
     if grid:
         params, name = driver.grid_params(grid), f"{m.name}_{driver.variant(grid)}"
@@ -313,7 +320,9 @@ def lanes_point(uses_time: bool) -> list[S]:
     ]
 
 
-def lanes_step(m: Method, quaternion: bool, uses_time: bool, grid: bool = False) -> Func:
+def lanes_step(
+    m: Method, quaternion: bool, uses_time: bool, grid: bool = False, knots: driver.Knots = ()
+) -> Func:
     """m.name_step_lanes: one turn of m.name_integrate's loop on every lane,
     each branch a selection (a lane that stopped, or whose E is singular or
     whose trial is not finite, computes on and keeps nothing); E's LU and
@@ -343,8 +352,10 @@ def lanes_step(m: Method, quaternion: bool, uses_time: bool, grid: bool = False)
         *lanes_point(uses_time),
         assign(cd, sel(cmp(cd, "<", 0), driver.stop_code(nonfinite), cd)),
         assign(go, cmp(cd, "<", 0)),
-        assign(last, driver.last_step()),
+        *driver.next_knot(knots),
+        assign(last, driver.final_step(knots)),
         assign(h, sel(and_(go, last), t1 - t, h)),
+        *driver.knot_clip(knots, last, go),
         assign(driver.stat("h"), sel(go, h, driver.stat("h"))),
         *matrix(R),
         driver.count("decompositions", sel(go, Int(1), Int(0))),
@@ -409,7 +420,8 @@ def lanes_step(m: Method, quaternion: bool, uses_time: bool, grid: bool = False)
     doubles = ["inv_h", "err", "fac", "gus", "total"] + ["delta"] * uses_time
     doubles += ["norm"] * quaternion
     locals_ = (*(real(n, "inout") for n in doubles),
-               *(Decl(n, "bool", (), "inout") for n in STEP_BOOLS))  # fmt: skip
+               *(Decl(n, "bool", (), "inout") for n in STEP_BOOLS),
+               *driver.knot_locals(knots))  # fmt: skip
     if grid:
         locals_ += driver.lane_grid_locals(body)
         doc = (f"One turn of {m.name}_grid's loop on every lane.",)
