@@ -629,24 +629,29 @@ def knot_doc(knots: Knots) -> tuple[str, ...]:
 
 
 def knot_locals(knots: Knots) -> tuple[Decl, ...]:
-    """The table times (a constant table) and tk, the next one a step stops at."""
-    if not knots:
-        return ()
-    return (Decl("knots", "double", (len(knots),), values=knots), real("tk", "inout"))
+    """tk, the next table time a step stops at."""
+    return (real("tk", "inout"),) if knots else ()
+
+
+def knot_function(knots: Knots) -> Func:
+    """next_table_time(t, t1): the first table time after t that a step can
+    reach (one lost in the rounding of t is passed: a step ends on a time to
+    within an ulp), else t1; a forward scan of the sorted times. One copy of
+    the times, called by every adaptive loop (over lanes, lane by lane)."""
+    k, time, end = Var("k"), Var("t"), Var("t1")
+    reachable = and_(cmp(KNOTS[k], "<", end), not_(fn("step_underflow", KNOTS[k] - time, time)))
+    body = (
+        For("k", Int(len(knots)), (If(reachable, (Return(KNOTS[k]),)),)),
+        Return(end),
+    )
+    table = (Decl("knots", "double", (len(knots),), values=knots),)
+    doc = ("The first torque-table time after t a step can reach, before t1; else t1.",)
+    return Func("next_table_time", (real("t"), real("t1")), body, "double", table, doc)
 
 
 def next_knot(knots: Knots) -> list[S]:
-    """tk := the first table time after t that a step can reach (one lost
-    in the rounding of t is passed: a step ends on a time to within an ulp),
-    else t1; a forward scan of the sorted times, by selection."""
-    if not knots:
-        return []
-    k = Var("kt")
-    after = and_(cmp(KNOTS[k], "<", TK), not_(fn("step_underflow", KNOTS[k] - t, t)))
-    return [
-        assign(TK, t1),
-        For("kt", Int(len(knots)), (assign(TK, sel(after, KNOTS[k], TK)),)),
-    ]
+    """tk := next_table_time(t, t1) (knot_function)."""
+    return [assign(TK, fn("next_table_time", t, t1))] if knots else []
 
 
 def reaches_knot(step: E = h) -> E:

@@ -193,6 +193,7 @@ def program(
     adaptive = any(not m.fixed_step for m in methods)
     candidates = [*common.shared(quaternion, adaptive, True), *elementary.functions()]
     candidates += [driver.grid_checks()] if adaptive else []
+    candidates += [driver.knot_function(knots)] if knots and adaptive else []
     if blocks is not None:
         nx = len(blocks.end)
         candidates += [
