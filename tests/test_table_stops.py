@@ -135,3 +135,17 @@ def test_the_lanes_stop_where_the_single_calls_do(
     for j, x in enumerate(x0s):
         single_out, _, _ = comp.integrate_grid(method, x, c, times, **TOL)
         assert np.array_equal(outs[j], single_out)
+
+
+@pytest.mark.parametrize("mode", ["ModelExchange", "CoSimulation"])
+def test_the_fmu_stops_at_the_table_times(tmp_path: Path, mode: str) -> None:
+    """Model Exchange announces each table time as a time event (FMPy's
+    CVODE stopped nowhere near the pulse, u4 = 0, before); Co-Simulation's
+    doStep integrates with the scene's code."""
+    import fmpy  # the FMU tests' extra
+    from fmu_cases import build_model
+
+    scene = parse(TEXT, "pulse")
+    fmu = build_model(scene, "dop853", tmp_path / "fmu")
+    out = fmpy.simulate_fmu(str(fmu), fmi_type=mode, stop_time=10.0, output_interval=1.0)
+    assert out["u4"][-1] == pytest.approx(KICK, rel=1e-6)
