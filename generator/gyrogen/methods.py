@@ -132,6 +132,10 @@ PAIR_ERR_FLOOR = 1e-4
 taken below, this (the PI controller's err_old)."""
 LAST_STEP_SLACK = 1.01
 """A step that would end within 1% of t1 is stretched to end on it."""
+STEP_UNDERFLOW = 16.0
+"""A step below this many DBL_EPSILON |t| is lost in the rounding of t: the
+adaptive methods stop there (ERR_STEP_UNDERFLOW), and a torque table's
+times closer than twice that cannot each end a step (scene rules)."""
 
 
 def literal(value: float) -> str:

@@ -23,6 +23,7 @@ from gyrogen.abi import (
 )
 from gyrogen.abi_groups import MAX_START_ANGLE, state_kind
 from gyrogen.limits import MAX_OUTPUT_POINTS, MIN_OUTPUT_STEP
+from gyrogen.methods import STEP_UNDERFLOW
 from gyrogen.setup_checks import first_failure
 
 _C_KEYWORDS = frozenset(
@@ -243,6 +244,13 @@ def check_table(torque: str, table: list[tuple[float, float]] | None) -> None:
         raise ValueError("torque = 'table' needs torque_table with at least 2 (t, T) points")
     if any(b[0] <= a[0] for a, b in itertools.pairwise(table)):
         raise ValueError("torque_table times must increase strictly")
+    for (a, _), (b, _) in itertools.pairwise(table):
+        if b - a <= 2 * STEP_UNDERFLOW * sys.float_info.epsilon * max(abs(a), abs(b)):
+            raise ValueError(
+                f"torque_table times {a!r} and {b!r} lie within the rounding of t: a step "
+                f"cannot end on each (they must differ by more than "
+                f"{2 * STEP_UNDERFLOW:g} DBL_EPSILON |t|)"
+            )
     for i, (t, torque_value) in enumerate(table):
         if why := folded_size(torque_value):
             raise ValueError(f"torque_table[{i}]: T = {torque_value!r} at t = {t:g}: {why}")

@@ -14,6 +14,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from gyrogen import abi
+from gyrogen import methods as registry
 from gyrogen.abi_groups import ANGLE_SCALE, StateKind
 from gyrogen.codegen.integrators import quaternion as euler_parameters
 from gyrogen.codegen.ir.nodes import (
@@ -187,7 +188,8 @@ def bad_arguments() -> Func:
 def step_underflow() -> Func:
     t = Var("t")
     small = or_(
-        cmp(h, "<", Num(16.0) * Const("EPSILON") * fn("abs", t)), cmp(h, "<", Const("TINY"))
+        cmp(h, "<", Num(registry.STEP_UNDERFLOW) * Const("EPSILON") * fn("abs", t)),
+        cmp(h, "<", Const("TINY")),
     )
     doc = ("h is lost in the rounding of t: the solution cannot be resolved further.",)
     return Func("step_underflow", (real("h"), real("t")), (Return(small),), "bool", doc=doc)
