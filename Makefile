@@ -164,6 +164,7 @@ verify-axes: setup
 ## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
 ## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
 ## FUZZ_TOLERANCE drawn motions on which every adaptive method keeps its tolerance in each state group,
+## FUZZ_VAR drawn scenes whose state transition matrix and sensitivities meet the flow's differences,
 ## C and Fortran running every method alike on FUZZ_AGREE drawn scenes of each attitude (with and
 ## without -march=native), then the scene-space property test at scale: FUZZ_EXAMPLES drawn scenes (then FUZZ_CLUSTERS
 ## clusters, then FUZZ_CMGS clusters of control-moment gyros) with a fresh seed on every core; prints the counts, a reproducing TOML per failure in fuzz-failures/
@@ -175,9 +176,12 @@ FUZZ_SWEEPS ?= 5000
 FUZZ_AGREE ?= 250
 FUZZ_TOLERANCE ?= 300
 FUZZ_EVENTS ?= 20
+FUZZ_VAR ?= 12
 fuzz: setup
 	GYROGEN_EVENT_DRAWS=$(FUZZ_EVENTS) GYROGEN_EVENT_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q -n auto tests/test_events_drawn.py
+	GYROGEN_VAR_EXAMPLES=$(FUZZ_VAR) $(BIN)/python -m pytest -q -n auto tests/test_sensitivities.py \
+	  -k drawn_scenes
 	GYROGEN_TOLERANCE_EXAMPLES=$(FUZZ_TOLERANCE) $(BIN)/python -m pytest -q tests/test_global_error.py \
 	  -k every_method
 	GYROGEN_GIMBAL_DRAWS=$(FUZZ_GIMBAL) GYROGEN_GIMBAL_SEED=$$(od -An -N4 -tu4 /dev/urandom) \

@@ -4,6 +4,7 @@ system (Phi' = J_x Phi, S' = J_x S + J_p) and Compiled.integrate_var."""
 from __future__ import annotations
 
 import itertools
+import os
 import subprocess
 import sys
 import tomllib
@@ -458,8 +459,13 @@ def normalization(x0: np.ndarray, quaternion: bool) -> np.ndarray:
     return out
 
 
+VAR_EXAMPLES = int(os.environ.get("GYROGEN_VAR_EXAMPLES", "2"))
+"""Drawn scenes whose Phi and S meet the flow's differences: the suite's
+fixed two (about 30 s each), `make fuzz` FUZZ_VAR."""
+
+
 @pytest.mark.slow
-@settings(max_examples=4, deadline=None, derandomize=True, database=None,
+@settings(max_examples=VAR_EXAMPLES, deadline=None, derandomize=True, database=None,
           phases=[Phase.generate], suppress_health_check=list(HealthCheck))  # fmt: skip
 @given(drawn=scenes(), pick=st.randoms(use_true_random=False))
 def test_drawn_scenes_against_finite_differences(drawn, pick, tmp_path_factory, cache_dir):
