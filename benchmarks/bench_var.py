@@ -12,7 +12,8 @@ each figure the best of R repeats of a loop lasting ~20 ms, the K rounds
 side by side, one after another, so that each saw the same load (printed
 before and after). Phi's error: the largest entry of |Phi - Phi_ref|
 relative to its column's largest entry, Phi_ref from taylor at 1e-15.
-Then 64 trajectories in SIMD lanes against a loop, and (when installed)
+Then the Taylor jets' sizes (nodes, full convolutions), plain and with Phi,
+64 trajectories in SIMD lanes against a loop, and (when installed)
 heyoka's var_ode_sys against gyrogen's taylor.
 
 With --baseline REV, gyrogen as of REV (methods.rev_tree: a git worktree in a
@@ -39,6 +40,7 @@ from methods import CLOCKS, GYROGEN, rev_tree, run
 from gyrogen.analysis.bench import heyoka_peer
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.simulate.engine import runtime_values
+from gyrogen.codegen.context import make_context
 from gyrogen.codegen.generate import unit_of
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_dir, build_scene
@@ -116,6 +118,7 @@ def main() -> None:
     best = timed(trees, methods, x0, c, args)
     print(f"after:  {load()}")
     table(trees, methods, best, x0, c, ref, args)
+    jets()
     lanes(every, x0, c, args)
     heyoka(every, x0, c, ref, args)
 
@@ -171,6 +174,18 @@ def table(
                 row.append(f"{t * 1e6:{width}.0f} {t / plain:6.2f} {steps:>{sw}}"
                            f" {column_error(phi, ref):8.1e}")  # fmt: skip
             print(" ".join(row))
+
+
+def jets() -> None:
+    """The Taylor jets' sizes, plain and with Phi: their nodes, and the
+    convolutions whose sums run over every lower order (Jet.full), which set
+    the cost of an order (k terms each at order k) and so of a step."""
+    context = make_context(parse(scene_text("all"), "gyrostat.toml"))
+    assert context.variational is not None, "the scene has [sensitivities]"
+    print("taylor's jet: nodes, full convolutions (a sum over every lower order)")
+    for name, jet in (("plain", context.jet), ("Phi", context.variational.jet)):
+        assert jet is not None, "the default scene has a Taylor jet"
+        print(f"{name:<8} nx {jet.nx:4d}  nodes {len(jet.nodes):4d}  full {jet.full():4d}")
 
 
 def lanes(m: Compiled, x0: np.ndarray, c: np.ndarray, args: argparse.Namespace) -> None:
