@@ -194,14 +194,18 @@ def parameter_sets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 class _Watch:
     """The sampled metrics of a chunk's trajectories, updated sample by
-    sample; values: each parameter, a number or one per trajectory."""
+    sample; values: each parameter, a number or one per trajectory;
+    located: the time_to thresholds are located as events (their columns
+    are the events' first times: see does not look for crossings)."""
 
-    def __init__(self, spec: Spec, values: dict[str, Any], x0: np.ndarray) -> None:
+    def __init__(self, spec: Spec, values: dict[str, Any], x0: np.ndarray,
+                 located: bool = False) -> None:  # fmt: skip
         states = spec.scene.states
         self.u = [states.index(f"u{i}") for i in range(1, 5)]
         self.lumped = lumped_inertias(*(values[n] for n in LUMPED_FROM))
         self.J = values["J"]
         self.thresholds = spec.sweep.metrics.time_to
+        self.located = located
         self.states = states
         every = np.arange(len(x0))
         self.nutation, self.rate, self.h0 = self._look(x0, every)
@@ -210,25 +214,33 @@ class _Watch:
         self.start = {q: self._quantity(q, x0, every) - thr for q, thr in self.thresholds.items()}
         self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
 
-    def _momentum(self, x: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """H at the states x of rows over a power of two per row, and that power: 1
+    def _rates(self, x: np.ndarray) -> np.ndarray:
+        """(4, N) u1..u4 at the states x (N, nx), each row contiguous."""
+        first = self.u[0]
+        if self.u == list(range(first, first + 4)):
+            return np.ascontiguousarray(x[:, first : first + 4].T)  # one copy, no gather
+        return np.ascontiguousarray(x[:, self.u].T)
+
+    def _momentum(self, u: np.ndarray, rows: np.ndarray) -> tuple[tuple[np.ndarray, ...], Any]:
+        """H at the rates u (4, N) of rows over a power of two per row, and that power: 1
         unless the rates reach 2^600 (inertias to 1e50 times rates to 1e300
         overflowed the products, an arctan2 of infinities then 45 degrees)."""
-        u = x[:, self.u]
-        big = np.max(np.abs(u), axis=1, initial=0.0, where=np.isfinite(u))
-        scale = np.ldexp(1.0, np.where(big >= 2.0**600, np.frexp(big)[1], 0))
-        u1, u2, u3, u4 = (u / scale[:, None]).T  # exact: a power of two
+        scale: Any = 1.0
+        if not np.fmax.reduce(np.abs(u), axis=None, initial=0.0) < 2.0**600:  # rare: scale
+            big = np.max(np.abs(u), axis=0, initial=0.0, where=np.isfinite(u))
+            scale = np.ldexp(1.0, np.where(big >= 2.0**600, np.frexp(big)[1], 0))
+            u = u / scale  # exact: a power of two
         lumped = tuple(v[rows] if np.ndim(v) else v for v in self.lumped)  # per row, or shared
         J = self.J[rows] if np.ndim(self.J) else self.J
-        return np.array(body_momentum(lumped, J, u1, u2, u3, u4)), scale
+        return body_momentum(lumped, J, *u), scale
 
     def _look(self, x: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The nutation angle, |omega| and |H| at the states x of rows (|H|
         inf where it is beyond doubles)."""
-        h, scale = self._momentum(x, rows)
+        u = self._rates(x)
+        h, scale = self._momentum(u, rows)
         transverse = np.hypot(h[0], h[2])
-        u1, u2, u3 = (x[:, i] for i in self.u[:3])
-        rate = np.hypot(np.hypot(u1, u2), u3)  # no square to overflow: |u| to 1e308
+        rate = np.hypot(np.hypot(u[0], u[1]), u[2])  # no square to overflow: |u| to 1e308
         with np.errstate(over="ignore"):
             norm = np.hypot(transverse, h[1]) * scale
         return np.arctan2(transverse, h[1]), rate, norm
@@ -238,15 +250,15 @@ class _Watch:
             return self._look(x, rows)[0 if q == "nutation" else 1]
         return x[:, self.states.index(q)]
 
-    def see(self, times: np.ndarray, xs: np.ndarray, rows: np.ndarray) -> None:
+    def see(self, times: np.ndarray, xs: np.ndarray, rows: np.ndarray, begun: int = 0) -> None:
         """The states xs[i, k] of row rows[i] at times[k] (NaN where its run
         did not reach: a failed run's metrics cover the samples it reached),
-        all in one look."""
+        all in one look; the first begun columns are the rows' starts (seen
+        already: no crossing there)."""
         n, m, nx = xs.shape
-        flat = xs.reshape(n * m, nx)
+        flat = xs.reshape(n * m, nx)  # a view where xs is a whole grid
         at = np.repeat(rows, m)
         nutation, rate, norm = (v.reshape(n, m) for v in self._look(flat, at))
-        reached = ~np.isnan(xs[:, :, 0])
         every = np.fmax.reduce  # NaN (not reached) skipped; all NaN: NaN
         self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=1))
         self.rate[rows] = np.fmax(self.rate[rows], every(rate, axis=1))
@@ -254,11 +266,16 @@ class _Watch:
         with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
             drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
         self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=1))
+        if self.located or not self.thresholds:
+            return
+        reached = ~np.isnan(xs[:, begun:, 0])
+        looked = {"nutation": nutation, "rate": rate}
         for q, thr in self.thresholds.items():
-            value = self._quantity(q, flat, at).reshape(n, m)
-            crossed = (np.sign(value - thr) != np.sign(self.start[q][rows, None])) & reached
+            value = looked[q] if q in looked else xs[:, :, self.states.index(q)]
+            crossed = np.sign(value[:, begun:] - thr) != np.sign(self.start[q][rows, None])
+            crossed &= reached
             first = crossed.any(axis=1) & np.isnan(self.time_to[q][rows])
-            self.time_to[q][rows[first]] = times[np.argmax(crossed[first], axis=1)]
+            self.time_to[q][rows[first]] = times[begun:][np.argmax(crossed[first], axis=1)]
 
 
 @dataclass
@@ -285,7 +302,7 @@ class _Runs:
         row rows[i] at times[k]; NaN past a failure: a run's metrics cover
         the samples it reached)."""
         if self.watch is not None:
-            self.watch.see(times[1:], out[:, 1:], rows)
+            self.watch.see(times, out, rows, begun=1)
 
 
 GRID_BLOCK = 1 << 21
@@ -309,13 +326,16 @@ def _integrate(
     sweep = spec.sweep
     times = np.linspace(0.0, sweep.t_end, sweep.metrics.points + 1)
     n = len(x0)
+    with_events = bool(spec.scene.events) and not methods.get(sweep.method).fixed_step
     runs = _Runs(
         x0, np.zeros(n, dtype=np.int32), np.zeros(n),
         {name: np.zeros(n, dtype=np.int64) for name in COUNTERS},
-        _Watch(spec, values, x0) if set(sweep.metrics.keep) & set(SAMPLED) else None,
+        _Watch(spec, values, x0, located=with_events)
+        if set(sweep.metrics.keep) & set(SAMPLED)
+        else None,
         {},
     )  # fmt: skip
-    if spec.scene.events and not methods.get(sweep.method).fixed_step:
+    if with_events:
         _with_events(comp, spec, batches, runs, times)
     elif methods.get(sweep.method).fixed_step or len(times) == 2:
         _restarted(comp, spec, batches, runs, times)
