@@ -722,3 +722,31 @@ def test_ctrl_c_while_writing_leaves_nothing_in_out(
     code, err = interrupted(out / where, argv, cache_dir)
     assert code == 130 and err.endswith("gyrogen: aborted\n") and "Traceback" not in err
     assert list(out.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_an_event_only_a_table_pulse_makes_happen_is_located(tmp_path: Path, cache: None) -> None:
+    """A wheel-rate event only a torque table's pulse of 5e-5 s (2.003 to
+    2.0031 s, 0.5 N m at its peak) makes happen, located by simulate's
+    _events call over the whole run: once, within the pulse (no step
+    crosses a table time), where the trajectory is at the threshold."""
+    from gyrogen import api
+    from gyrogen.analysis.simulate import engine
+
+    pulse = "[[0.0, 0.0], [2.003, 0.0], [2.00305, 0.5], [2.0031, 0.0], [9.0, 0.0]]"
+    text = builtin_text("gyrostat").replace('T   = "runtime"', "").replace("T   = 0.01", "")
+    text = text.replace('torque = "constant"', f'torque = "table"\ntorque_table = {pulse}')
+    text += '\n[[events]]\nname = "spun"\nexpr = "u4 - 50.0004"\ndirection = "up"\n'
+    (tmp_path / "pulse.toml").write_text(text)
+    scene = load(tmp_path / "pulse.toml")
+    comp = api.compile(scene)
+    c = engine.given_constants(scene, comp, engine.runtime_values(scene))
+    breaks = scene_view.table_times(scene)
+    start = engine.Start(comp, c, np.array(scene.initial_state()), (1e-10, 1e-10), breaks)
+    settings = Settings(t_end=4.0, dt=0.01, method="dop853", plot=False)
+    log, stopped, full = engine.located(start, settings)
+    assert log.names == ["spun"] and not stopped and full is None
+    assert 2.003 < log.times[0] < 2.0031  # within the pulse
+    traj = engine.integrate(start, settings, lambda n: None)
+    u4 = scene.states.index("u4")
+    np.testing.assert_allclose(traj.sample(log.times)[:, u4], 50.0004, rtol=1e-10)
