@@ -161,11 +161,13 @@ verify-axes: setup
 	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_gimbals.py \
 	  tests/test_sweep_misalign.py -k "reference and axes or pyramid_gimbal_runs"
 
-## test-wide: the cases the suite leaves to this target (skipped there as "make test-wide"): the
-## further built-in scenes and builds of a path a kept case already takes
+## test-wide: the cases the suite leaves to this target (tests/wide.py's mark, skipped there as
+## "make test-wide"): every built-in scene simulated, and the further built-in scenes and builds
+## on which C and Fortran run radau5 and every method alike
 test-wide: setup
 	GYROGEN_WIDE=1 $(BIN)/python -m pytest -q -p no:cacheprovider -rs tests/test_scene_space.py \
-	  -k "radau5_take_the_same_steps_on_builtin or every_method_alike"
+	  tests/test_simulate.py -k "radau5_take_the_same_steps_on_builtin or every_method_alike or \
+	  every_builtin_scene_simulates"
 
 ## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
 ## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),

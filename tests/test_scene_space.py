@@ -15,6 +15,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, seed, settings
 from scene_space import Draw, check, run_shard, scenes
 from scene_space_clusters import clusters
+from wide import WIDE
 
 pytestmark = pytest.mark.slow  # hundreds of drawn scenes, each generated, compiled and compared
 
@@ -62,13 +63,6 @@ def test_every_drawn_cmg_cluster_keeps_the_promise(
     counts, failures = run_shard(3000, CMG_EXAMPLES, tmp_path / "failures", drawn)
     assert not failures, "\n\n".join(failures)
     assert counts["examples"] == CMG_EXAMPLES and counts["checked"] >= 1, counts
-
-
-WIDE = pytest.mark.skipif(
-    not os.environ.get("GYROGEN_WIDE"), reason="a further point of the same path: make test-wide"
-)
-"""The cases past the suite's slice (each takes the path a kept case takes,
-on another scene or build): `make test-wide` runs them."""
 
 
 REGRESSIONS = sorted((Path(__file__).parent / "regressions").glob("*.toml"))
