@@ -162,12 +162,12 @@ verify-axes: setup
 	  tests/test_sweep_misalign.py -k "reference and axes or pyramid_gimbal_runs"
 
 ## test-wide: the cases the suite leaves to this target (tests/wide.py's mark, skipped there as
-## "make test-wide"): every built-in scene simulated, and the further built-in scenes and builds
+## "make test-wide"): every built-in scene simulated and derived for `scenes --ops`, and the further built-in scenes and builds
 ## on which C and Fortran run radau5 and every method alike
 test-wide: setup
 	GYROGEN_WIDE=1 $(BIN)/python -m pytest -q -p no:cacheprovider -rs tests/test_scene_space.py \
-	  tests/test_simulate.py -k "radau5_take_the_same_steps_on_builtin or every_method_alike or \
-	  every_builtin_scene_simulates"
+	  tests/test_simulate.py tests/test_scenes.py -k "radau5_take_the_same_steps_on_builtin or \
+	  every_method_alike or every_builtin_scene_simulates or op_counts"
 
 ## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
 ## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
