@@ -7,7 +7,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 SCENE_DIR := generated/gyrostat
 
-.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-grid bench-events bench-sweep-metrics bench-var bench-methods bench-lanes bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes docs docs-bench
+.PHONY: setup system-deps run test test-fast lint generate check-generated bench bench-taylor bench-auto bench-clusters bench-call bench-grid bench-events bench-sweep-metrics bench-var bench-methods bench-lanes bench-ensemble report check fuzz clean distclean examples strict fmu-agreement bench-lib sweep-bench sweep-map verify-axes test-wide docs docs-bench
 
 ## setup: the system packages the suite uses (SYSTEM_PACKAGES, through apt-get when root) and the Python environment in .venv
 setup: system-deps $(STAMP)
@@ -160,6 +160,14 @@ verify-axes: setup
 	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_cluster_axes.py -k issues_size
 	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_gimbals.py \
 	  tests/test_sweep_misalign.py -k "reference and axes or pyramid_gimbal_runs"
+
+## test-wide: the cases the suite leaves to this target (tests/wide.py's mark, skipped there as
+## "make test-wide"): every built-in scene simulated and derived for `scenes --ops`, and the further built-in scenes and builds
+## on which C and Fortran run radau5 and every method alike
+test-wide: setup
+	GYROGEN_WIDE=1 $(BIN)/python -m pytest -q -p no:cacheprovider -rs tests/test_scene_space.py \
+	  tests/test_simulate.py tests/test_scenes.py -k "radau5_take_the_same_steps_on_builtin or \
+	  every_method_alike or every_builtin_scene_simulates or op_counts"
 
 ## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
 ## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),

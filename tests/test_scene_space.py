@@ -15,6 +15,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, seed, settings
 from scene_space import Draw, check, run_shard, scenes
 from scene_space_clusters import clusters
+from wide import WIDE
 
 pytestmark = pytest.mark.slow  # hundreds of drawn scenes, each generated, compiled and compared
 
@@ -153,13 +154,18 @@ def drawn_scenes(attitude: str, n: int, seed_: int, integrators: str = '["radau5
     return texts
 
 
-@pytest.mark.parametrize("name", ["gyrostat", "stiff_wheel", "torque_free"])
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param("gyrostat", marks=WIDE), "stiff_wheel", pytest.param("torque_free", marks=WIDE)],
+)
 def test_c_and_fortran_radau5_take_the_same_steps_on_builtin_scenes(
     name: str,
     cache_dir: Path,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """The built-in scenes are 3-1-2 ones."""
+    """The built-in scenes are 3-1-2 ones. The suite runs stiff_wheel, the
+    stiff one radau5 is for; `make test-wide` runs gyrostat and torque_free
+    too."""
     monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
     steps = radau5_steps(name, (1e-6, 1e-9))
     assert [code for code, _, _ in steps["c"]] == [0, 0], steps
@@ -186,8 +192,16 @@ def every_method(scene: str, methods: tuple[str, ...] = EVERY) -> dict[str, list
     return method_runs(scene, plan)
 
 
-@pytest.mark.parametrize("portable", [False, True], ids=["native", "portable"])
-@pytest.mark.parametrize("attitude", ["quaternion", "euler312"])
+@pytest.mark.parametrize(
+    ("attitude", "portable"),
+    [
+        ("quaternion", False),
+        pytest.param("quaternion", True, marks=WIDE),
+        ("euler312", False),
+        ("euler312", True),
+    ],
+    ids=["quaternion-native", "quaternion-portable", "euler312-native", "euler312-portable"],
+)
 def test_c_and_fortran_run_every_method_alike_on_drawn_scenes(
     attitude: str,
     portable: bool,
@@ -199,7 +213,9 @@ def test_c_and_fortran_run_every_method_alike_on_drawn_scenes(
     every method (the Taylor method too where the scene is smooth; radau5
     at a loose and a tight tolerance besides) and end within 1e-14 (scaled
     by max(1, |x|)) of each other: built with -march=native and without
-    (GYROGEN_PORTABLE), from one generation of each scene."""
+    (GYROGEN_PORTABLE), from one generation of each scene. The suite builds
+    the quaternion scenes natively only; `make test-wide` builds them
+    portably too, and `make fuzz` draws GYROGEN_AGREE_SCENES of each."""
     monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
     if portable:
         monkeypatch.setenv("GYROGEN_PORTABLE", "1")

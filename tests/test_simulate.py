@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from ctrl_c import interrupted
 from matplotlib.image import imread
+from wide import WIDE
 
 from gyrogen.analysis.simulate import plots, trajectory
 from gyrogen.analysis.simulate.engine import check_solution
@@ -502,14 +503,22 @@ def test_simulate_refuses_an_integrator_the_scene_lacks(tmp_path: Path) -> None:
         )
 
 
+SIMULATED = ("gyrostat", "stiff_wheel", "rw4_pyramid", "cmg4_pyramid")
+"""The built-in scenes the suite simulates: one per method auto picks
+(taylor, radau5, dop853) and a gimbal's; `make test-wide` simulates the rest."""
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", builtin_names())
+@pytest.mark.parametrize(
+    "name", [n if n in SIMULATED else pytest.param(n, marks=WIDE) for n in builtin_names()]
+)
 def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
     """Each built-in scene generates, builds and simulates (a short span)
     with the method it picks (the default, auto): the stiff one with the
     compiled Radau IIA its stiffness calls for, and says why; the others with
     the compiled Taylor method where the scene offers it (a smooth rhs), else
-    the compiled dop853 (scipy's only where a scene compiled none)."""
+    the compiled dop853 (scipy's only where a scene compiled none). The
+    suite runs SIMULATED; `make test-wide` every built-in scene."""
     from gyrogen.analysis.simulate import engine
 
     scene = load(name)
