@@ -54,7 +54,7 @@ test: setup lint
 
 ## test-fast: lint, then the suite without the tests marked slow (the default scene still derived,
 ## generated, compiled as C and Fortran and checked against the reference): under a minute on 2 cores
-## (58 s with the machine's load average at 3.4, best of 3)
+## (56-58 s on 2 cores with the machine's load average at 1.9, its own load)
 test-fast: setup lint
 	$(BIN)/python -m pytest -m "not slow"
 

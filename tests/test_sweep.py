@@ -718,6 +718,7 @@ time_to = {{ nutation = 0.3, rate = 1.0 }}
 too); with I = 1e40 its momentum, 1e340, is beyond doubles."""
 
 
+@pytest.mark.slow  # a sweep of its own scene: its derivation and build
 @pytest.mark.filterwarnings("error")  # a numpy warning in a chunk fails the sweep
 @pytest.mark.parametrize("inertia", [0.02, 1e40])
 def test_a_huge_start_rate_is_measured_without_overflow(
