@@ -512,7 +512,7 @@ SIMULATED = ("gyrostat", "stiff_wheel", "rw4_pyramid", "cmg4_pyramid")
 @pytest.mark.parametrize(
     "name", [n if n in SIMULATED else pytest.param(n, marks=WIDE) for n in builtin_names()]
 )
-def test_every_builtin_scene_simulates(name: str, tmp_path: Path) -> None:
+def test_every_builtin_scene_simulates(name: str, tmp_path: Path, cache: None) -> None:
     """Each built-in scene generates, builds and simulates (a short span)
     with the method it picks (the default, auto): the stiff one with the
     compiled Radau IIA its stiffness calls for, and says why; the others with
