@@ -18,10 +18,28 @@ from gyrogen.codegen.integrators.taylor_jet import kept
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
-from gyrogen.codegen.ir.nodes import Bin, Comment, Decl, E, Fn, For, Func, Int, Num, Un, Var, assign
+from gyrogen.codegen.ir.nodes import (
+    Bin,
+    Call,
+    Comment,
+    Decl,
+    E,
+    Fn,
+    For,
+    Func,
+    If,
+    Int,
+    Num,
+    Row,
+    Un,
+    Var,
+    assign,
+)
 from gyrogen.scene import default
 
 STATE = {"x": Decl("x", "double", ("NX",), "inout")}
+SCRATCH = {**STATE, "y": Decl("y", "double", ("NX",), "inout"),
+           "k": Decl("k", "double", (2, "NX"), "inout")}  # fmt: skip
 
 
 def _func(*body) -> Func:
@@ -153,3 +171,22 @@ def test_a_run_of_parentheses_is_wrapped_after_one() -> None:
     assert all(len(line) <= WRAP for line in lines), max(map(len, lines))
     joined = "".join(line.removesuffix(" &") for line in lines)
     assert joined.replace(" ", "") == text.replace(" ", "")
+
+
+def test_a_branchs_own_arrays_are_set_on_every_lane() -> None:
+    """Over lanes, a branch around a call runs where any lane needs it: its
+    assignments keep a lane's old value by selection where its condition is
+    false, but not those to the arrays the branch owns (If.own: read only
+    where it holds), which are set as they are; a branch owns nothing of
+    the single trajectory's (C prints it as any)."""
+    x, y, go = Var("x"), Var("y"), Var("go")
+    then = (assign(y[0], x[0] * 2.0), Call("rhs", (Num(0.0), y, Var("c"), Row("k", Int(1)))),
+            assign(x[1], x[0] + 1.0))  # fmt: skip
+    locals_ = (Decl("go", "bool", (), "inout"),)
+    for own, selected in (((), True), (("y",), False)):
+        f = Func("f", (), (If(go, then, own=own),), None, locals_)
+        text = LanesPrinter("p", "P", {}, SCRATCH).function(f)
+        assert ("L->y[0][l] = go[l] ? L->x[0][l] * 2.0 : L->y[0][l];" in text) == selected
+        assert ("L->y[0][l] = L->x[0][l] * 2.0;" in text) != selected
+        assert "L->x[1][l] = go[l] ? L->x[0][l] + 1.0 : L->x[1][l];" in text
+        assert "y[0] = x[0] * 2.0;" in CPrinter("p", "P", {}).function(f)

@@ -224,6 +224,11 @@ class Interpolant:
     points: Points
     at_end: bool = False
     scaled: bool = True
+    scratch: tuple[str, ...] = ()
+    """The arrays the coefficients set that only points reads, or that the
+    method sets again before it reads them (If.own: over lanes, set on
+    every lane with no selection, their values on a lane with no grid time
+    in its step never read)."""
 
 
 Points = Callable[[E, Callable[[E], At]], list[S]]
@@ -293,7 +298,7 @@ def passed(ok: E, dense: Interpolant, end: E, start: E, step: E, row: E = G) -> 
     coefficients and the grid times written when due (row: out's row of g,
     BASE + g over lanes). The step's acceptance and reached follow."""
     at = theta_at(dense, end, start, step)
-    coefficients = [If(DUE, dense.coefficients)] if dense.coefficients else []
+    coefficients = [If(DUE, dense.coefficients, own=dense.scratch)] if dense.coefficients else []
     return [assign(DUE, and_(ok, due(end))), *coefficients, If(DUE, (writes(dense, at, end, row),))]
 
 

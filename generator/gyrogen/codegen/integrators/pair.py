@@ -59,7 +59,10 @@ def interpolant(m: Method) -> driver.Interpolant:
     """Hairer's dense output of pair m (tableaus.DenseRK; dopri5.f's CONTD5,
     dop853.f's CONTD8): its extra stages and rows from the accepted step
     (told, hs; x still its start, k[fnew] f at its end), and the nested
-    value r1 + theta (r2 + (1 - theta) (r3 + theta (r4 + ...)))."""
+    value r1 + theta (r2 + (1 - theta) (r3 + theta (r4 + ...))). y (the
+    extra stages' points, the trial's next) and the coefficients are its
+    scratch: set on every lane where any needs them (the extra stages' k
+    rows are, as every rhs call over lanes)."""
     tab = m.tableau
     assert isinstance(tab, Explicit) and tab.dense is not None
     dense, r, hs, told = tab.dense, Var("dense"), Var("hs"), Var("told")
@@ -86,7 +89,7 @@ def interpolant(m: Method) -> driver.Interpolant:
             acc = terms[j] + (theta if j % 2 == 0 else Num(1.0) - theta) * acc
         return acc
 
-    return driver.Interpolant(tuple(out), driver.by_state(value))
+    return driver.Interpolant(tuple(out), driver.by_state(value), scratch=("y", "dense"))
 
 
 def dense_rows(m: Method) -> int:

@@ -239,7 +239,7 @@ class LanesPrinter(CPrinter):
             f"{pad}need = 0;",
             *any_lane,
             f"{pad}if (need) {{",
-            *self.block(tuple(converted(s.then, s.cond)), depth + 1),
+            *self.block(tuple(converted(s.then, s.cond, scratch=frozenset(s.own))), depth + 1),
             f"{pad}}}",
         ]
 
@@ -347,12 +347,14 @@ def converted(
     top: bool = False,
     own: frozenset = frozenset(),
     keep: Callable[[If], bool] = lambda s: False,
+    scratch: frozenset = frozenset(),
 ) -> list[S]:
     """if-conversion: each assignment under cond keeps its old value where
     cond is false. A branch may not assign what its condition reads. At the
     top, a branch around calls stays a branch, and one that keep keeps (run
     lane by lane). Names in own are the branch's own values (a local first
-    set in it): assigned as they are."""
+    set in it): assigned as they are; so are the elements of the arrays in
+    scratch, and of those a branch owns (If.own)."""
     out: list[S] = []
     for s in body:
         if top and isinstance(s, If) and (any(isinstance(x, Call) for x in nested(s)) or keep(s)):
@@ -362,13 +364,17 @@ def converted(
             assert not any(w in repr(s.cond) for w in written), f"branch assigns its condition: {s}"
             both = s.cond if cond is None else and_(cond, s.cond)
             other = not_(s.cond) if cond is None else and_(cond, not_(s.cond))
-            out += converted(s.then, both, own=own) + converted(s.orelse, other, own=own)
-        elif isinstance(s, Assign) and isinstance(s.target, Var) and s.target.name in own:
+            mine = scratch | frozenset(s.own)
+            out += converted(s.then, both, own=own, scratch=mine)
+            out += converted(s.orelse, other, own=own, scratch=scratch)
+        elif isinstance(s, Assign) and s.target.name in (
+            own if isinstance(s.target, Var) else scratch
+        ):
             out.append(s)
         elif isinstance(s, Assign) and cond is not None:
             out.append(Assign(s.target, Sel(cond, s.value, s.target), s.note))
         elif isinstance(s, For) and cond is not None:
-            body = tuple(converted(s.body, cond, own=own))
+            body = tuple(converted(s.body, cond, own=own, scratch=scratch))
             out.append(For(s.var, s.n, body, s.locals, s.type, s.start))
         else:
             out.append(s)

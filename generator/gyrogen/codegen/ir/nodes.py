@@ -247,6 +247,11 @@ class If(S):
     cond: E
     then: tuple[S, ...]
     orelse: tuple[S, ...] = ()
+    own: tuple[str, ...] = ()
+    """Arrays then sets for itself: read only where cond holds, or set
+    again before any other read. Over lanes (if-conversion) then sets them
+    on every lane as they are, with no selection to keep a lane's old
+    values; the scalar printers print the branch as any."""
 
 
 @dataclass(frozen=True)
