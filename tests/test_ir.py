@@ -20,6 +20,7 @@ from gyrogen.codegen.ir.fortran import FortranPrinter
 from gyrogen.codegen.ir.lanes import LanesPrinter
 from gyrogen.codegen.ir.nodes import (
     Bin,
+    Break,
     Call,
     Comment,
     Decl,
@@ -29,6 +30,7 @@ from gyrogen.codegen.ir.nodes import (
     Func,
     If,
     Int,
+    Loop,
     Num,
     Row,
     Un,
@@ -190,3 +192,25 @@ def test_a_branchs_own_arrays_are_set_on_every_lane() -> None:
         assert ("L->y[0][l] = L->x[0][l] * 2.0;" in text) != selected
         assert "L->x[1][l] = go[l] ? L->x[0][l] + 1.0 : L->x[1][l];" in text
         assert "y[0] = x[0] * 2.0;" in CPrinter("p", "P", {}).function(f)
+
+
+def test_a_loop_over_lanes_turns_while_any_lane_goes_on() -> None:
+    """go := go and ..., then a break where not go: over lanes one loop
+    whose turns run while any lane goes on (no lane by lane loop of its
+    own), the rest of a turn under go by selection, its own arrays set on
+    every lane, and what every lane shares written lane by lane."""
+    x, y, go, n = Var("x"), Var("y"), Var("go"), Var("n")
+    shared = {**SCRATCH, "out": Decl("out", "double", ("NX",))}
+    body = Loop((
+        assign(go, Bin("and", go, Bin("<", x[0], Num(1.0)))),
+        If(Un("not", go), (Break(),)),
+        If(go, (assign(x[0], x[0] + 0.5), assign(y[0], x[0] * 2.0)), own=("y",)),
+        If(go, (assign(Var("out")[n], y[0]),)),
+    ))  # fmt: skip
+    locals_ = (Decl("go", "bool", (), "inout"), Decl("n", "int", (), "in"))
+    text = LanesPrinter("p", "P", {}, shared).function(Func("f", (), (body,), None, locals_))
+    assert text.count("for (;;) {") == 1 and "if (!need) {" in text and "int need;" in text
+    assert "go[l] = go[l] && L->x[0][l] < 1.0;" in text
+    assert "L->x[0][l] = go[l] ? L->x[0][l] + 0.5 : L->x[0][l];" in text
+    assert "L->y[0][l] = L->x[0][l] * 2.0;" in text
+    assert "if (go[l]) {" in text and "L->out[n] = L->y[0][l];" in text

@@ -2125,27 +2125,41 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                     L->k[6][i][l]);
         }
     }
-    need = 0;
-    STIFF_WHEEL_SIMD
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        need |= due[l];
-    }
-    if (need) {
+    for (;;) {
+        STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            if (due[l]) {
-                for (;;) {
-                    if (!(L->g[l] < L->ntimes)) {
-                        break;
-                    }
-                    if (!(L->times[L->g[l]] < L->t[l])) {
-                        break;
-                    }
-                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
+        }
+        need = 0;
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - told[l]) / hs[l] : frac[l];
+        }
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            STIFF_WHEEL_SIMD
+            for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] + frac[l] * (L->dense[0][i][l] + (1.0 - frac[l]) *
+                        (L->dense[1][i][l] + frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                        L->dense[3][i][l])));
+            }
+        }
+        need = 0;
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+                if (due[l]) {
                     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
-                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
-                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
-                                L->dense[3][i][l])));
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
                     }
                     L->g[l] = L->g[l] + 1;
                 }
@@ -2928,28 +2942,42 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
             }
         }
     }
-    need = 0;
-    STIFF_WHEEL_SIMD
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        need |= due[l];
-    }
-    if (need) {
+    for (;;) {
+        STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            if (due[l]) {
-                for (;;) {
-                    if (!(L->g[l] < L->ntimes)) {
-                        break;
-                    }
-                    if (!(L->times[L->g[l]] < L->t[l])) {
-                        break;
-                    }
-                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
+        }
+        need = 0;
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - told[l]) / hs[l] : frac[l];
+        }
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            STIFF_WHEEL_SIMD
+            for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] + frac[l] * (L->dense[0][i][l] + (1.0 - frac[l]) *
+                        (L->dense[1][i][l] + frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                        (L->dense[3][i][l] + frac[l] * (L->dense[4][i][l] + (1.0 - frac[l]) *
+                        (L->dense[5][i][l] + frac[l] * L->dense[6][i][l]))))));
+            }
+        }
+        need = 0;
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+                if (due[l]) {
                     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
-                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
-                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
-                                (L->dense[3][i][l] + frac[l] * (L->dense[4][i][l] + (1.0 -
-                                frac[l]) * (L->dense[5][i][l] + frac[l] * L->dense[6][i][l]))))));
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
                     }
                     L->g[l] = L->g[l] + 1;
                 }
@@ -3671,26 +3699,41 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
         due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
                 L->h[l]));
     }
-    need = 0;
-    STIFF_WHEEL_SIMD
-    for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-        need |= due[l];
-    }
-    if (need) {
+    for (;;) {
+        STIFF_WHEEL_SIMD
         for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
-            if (due[l]) {
-                for (;;) {
-                    if (!(L->g[l] < L->ntimes)) {
-                        break;
-                    }
-                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
-                        break;
-                    }
-                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 :
+                    L->t[l] + L->h[l]));
+        }
+        need = 0;
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - L->t[l]) / L->h[l] : frac[l];
+        }
+        for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+            STIFF_WHEEL_SIMD
+            for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] * (1.0 - frac[l]) + frac[l] * (L->xnew[i][l] + (1.0 -
+                        frac[l]) * (L->dense[0][i][l] + frac[l] * L->dense[1][i][l]));
+            }
+        }
+        need = 0;
+        STIFF_WHEEL_SIMD
+        for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < STIFF_WHEEL_LANES; ++l) {
+                if (due[l]) {
                     for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
-                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
-                                * L->dense[1][i][l]));
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
                     }
                     L->g[l] = L->g[l] + 1;
                 }
@@ -4344,18 +4387,21 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
                         1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
             }
         }
-        if (due) {
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
+        for (;;) {
+            due = due && (g < ntimes && times[g] < t);
+            if (!due) {
+                break;
+            }
+            if (due) {
                 frac = (times[g] - told) / hs;
                 for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                    y[i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
                             (dense[2][i] + (1.0 - frac) * dense[3][i])));
+                }
+            }
+            if (due) {
+                for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                    out[g][i] = y[i];
                 }
                 g = g + 1;
             }
@@ -4962,19 +5008,22 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                         39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
             }
         }
-        if (due) {
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
+        for (;;) {
+            due = due && (g < ntimes && times[g] < t);
+            if (!due) {
+                break;
+            }
+            if (due) {
                 frac = (times[g] - told) / hs;
                 for (i = 0; i < STIFF_WHEEL_NX; ++i) {
-                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                    y[i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
                             (dense[2][i] + (1.0 - frac) * (dense[3][i] + frac * (dense[4][i] +
                             (1.0 - frac) * (dense[5][i] + frac * dense[6][i]))))));
+                }
+            }
+            if (due) {
+                for (i = 0; i < STIFF_WHEEL_NX; ++i) {
+                    out[g][i] = y[i];
                 }
                 g = g + 1;
             }

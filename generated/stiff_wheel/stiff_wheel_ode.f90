@@ -1832,22 +1832,25 @@ contains
               5)) + 2.382468931778144_c_double * k(i, 6))
         end do
       end if
-      if (due) then
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < t)) then
-            exit
-          end if
+      do
+        due = due .and. (g < ntimes .and. times(g) < t)
+        if (.not. due) then
+          exit
+        end if
+        if (due) then
           frac = (times(g) - told) / hs
           do i = 0, nx - 1
-            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+            y(i) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
                 1) + frac * (dense(i, 2) + (1.0_c_double - frac) * dense(i, 3))))
           end do
+        end if
+        if (due) then
+          do i = 0, nx - 1
+            out(i, g) = y(i)
+          end do
           g = g + 1
-        end do
-      end if
+        end if
+      end do
       if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)
@@ -2531,24 +2534,27 @@ contains
               14)) - 149.72683625798564_c_double * k(i, 15))
         end do
       end if
-      if (due) then
-        do
-          if (.not. (g < ntimes)) then
-            exit
-          end if
-          if (.not. (times(g) < t)) then
-            exit
-          end if
+      do
+        due = due .and. (g < ntimes .and. times(g) < t)
+        if (.not. due) then
+          exit
+        end if
+        if (due) then
           frac = (times(g) - told) / hs
           do i = 0, nx - 1
-            out(i, g) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
+            y(i) = x(i) + frac * (dense(i, 0) + (1.0_c_double - frac) * (dense(i, &
                 1) + frac * (dense(i, 2) + (1.0_c_double - frac) * (dense(i, &
                 3) + frac * (dense(i, 4) + (1.0_c_double - frac) * (dense(i, 5) + frac * dense(i, &
                 6)))))))
           end do
+        end if
+        if (due) then
+          do i = 0, nx - 1
+            out(i, g) = y(i)
+          end do
           g = g + 1
-        end do
-      end if
+        end if
+      end do
       if (ok) then
         do i = 0, nx - 1
           comp(i) = (xnew(i) - x(i)) - dx(i)

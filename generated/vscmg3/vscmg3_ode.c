@@ -5030,27 +5030,41 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                     L->k[6][i][l]);
         }
     }
-    need = 0;
-    VSCMG3_SIMD
-    for (l = 0; l < VSCMG3_LANES; ++l) {
-        need |= due[l];
-    }
-    if (need) {
+    for (;;) {
+        VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            if (due[l]) {
-                for (;;) {
-                    if (!(L->g[l] < L->ntimes)) {
-                        break;
-                    }
-                    if (!(L->times[L->g[l]] < L->t[l])) {
-                        break;
-                    }
-                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - told[l]) / hs[l] : frac[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] + frac[l] * (L->dense[0][i][l] + (1.0 - frac[l]) *
+                        (L->dense[1][i][l] + frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                        L->dense[3][i][l])));
+            }
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                if (due[l]) {
                     for (i = 0; i < VSCMG3_NX; ++i) {
-                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
-                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
-                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
-                                L->dense[3][i][l])));
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
                     }
                     L->g[l] = L->g[l] + 1;
                 }
@@ -5835,28 +5849,42 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
             }
         }
     }
-    need = 0;
-    VSCMG3_SIMD
-    for (l = 0; l < VSCMG3_LANES; ++l) {
-        need |= due[l];
-    }
-    if (need) {
+    for (;;) {
+        VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            if (due[l]) {
-                for (;;) {
-                    if (!(L->g[l] < L->ntimes)) {
-                        break;
-                    }
-                    if (!(L->times[L->g[l]] < L->t[l])) {
-                        break;
-                    }
-                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - told[l]) / hs[l] : frac[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] + frac[l] * (L->dense[0][i][l] + (1.0 - frac[l]) *
+                        (L->dense[1][i][l] + frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                        (L->dense[3][i][l] + frac[l] * (L->dense[4][i][l] + (1.0 - frac[l]) *
+                        (L->dense[5][i][l] + frac[l] * L->dense[6][i][l]))))));
+            }
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                if (due[l]) {
                     for (i = 0; i < VSCMG3_NX; ++i) {
-                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
-                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
-                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
-                                (L->dense[3][i][l] + frac[l] * (L->dense[4][i][l] + (1.0 -
-                                frac[l]) * (L->dense[5][i][l] + frac[l] * L->dense[6][i][l]))))));
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
                     }
                     L->g[l] = L->g[l] + 1;
                 }
@@ -6576,26 +6604,41 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
         due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 : L->t[l] +
                 L->h[l]));
     }
-    need = 0;
-    VSCMG3_SIMD
-    for (l = 0; l < VSCMG3_LANES; ++l) {
-        need |= due[l];
-    }
-    if (need) {
+    for (;;) {
+        VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            if (due[l]) {
-                for (;;) {
-                    if (!(L->g[l] < L->ntimes)) {
-                        break;
-                    }
-                    if (!(L->times[L->g[l]] < (last[l] ? t1 : L->t[l] + L->h[l]))) {
-                        break;
-                    }
-                    frac[l] = (L->times[L->g[l]] - L->t[l]) / L->h[l];
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (last[l] ? t1 :
+                    L->t[l] + L->h[l]));
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - L->t[l]) / L->h[l] : frac[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] * (1.0 - frac[l]) + frac[l] * (L->xnew[i][l] + (1.0 -
+                        frac[l]) * (L->dense[0][i][l] + frac[l] * L->dense[1][i][l]));
+            }
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                if (due[l]) {
                     for (i = 0; i < VSCMG3_NX; ++i) {
-                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
-                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
-                                * L->dense[1][i][l]));
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
                     }
                     L->g[l] = L->g[l] + 1;
                 }
@@ -8172,36 +8215,60 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
         L->cap[l] = ok[l] ? DBL_MAX : retry[l] ? L->h[l] * 0.5 : L->cap[l];
         due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
     }
-    need = 0;
-    VSCMG3_SIMD
-    for (l = 0; l < VSCMG3_LANES; ++l) {
-        need |= due[l];
-    }
-    if (need) {
+    for (;;) {
+        VSCMG3_SIMD
         for (l = 0; l < VSCMG3_LANES; ++l) {
-            if (due[l]) {
-                for (;;) {
-                    if (!(L->g[l] < L->ntimes)) {
-                        break;
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]);
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            frac[l] = due[l] ? L->times[L->g[l]] - told[l] : frac[l];
+        }
+        for (i = 0; i < 12; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->acc[i][l] = L->tay[order][i][l];
+            }
+        }
+        for (q = 0; q < order - 1; ++q) {
+            for (i = 0; i < 12; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->acc[i][l] = L->tay[order - 1 - q][i][l] + frac[l] * L->acc[i][l];
+                }
+            }
+        }
+        for (i = 0; i < 12; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->acc[i][l] = L->x[i][l] + frac[l] * L->acc[i][l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->acc[12][l] = L->x[12][l] + frac[l] * L->tay[1][12][l];
+            L->acc[13][l] = L->x[13][l] + frac[l] * L->tay[1][13][l];
+            L->acc[14][l] = L->x[14][l] + frac[l] * L->tay[1][14][l];
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                if (due[l]) {
+                    for (i = 0; i < VSCMG3_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->acc[i][l];
                     }
-                    if (!(L->times[L->g[l]] < L->t[l])) {
-                        break;
-                    }
-                    frac[l] = L->times[L->g[l]] - told[l];
-                    for (i = 0; i < 12; ++i) {
-                        L->acc[i][l] = L->tay[order][i][l];
-                    }
-                    for (q = 0; q < order - 1; ++q) {
-                        for (i = 0; i < 12; ++i) {
-                            L->acc[i][l] = L->tay[order - 1 - q][i][l] + frac[l] * L->acc[i][l];
-                        }
-                    }
-                    for (i = 0; i < 12; ++i) {
-                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] * L->acc[i][l];
-                    }
-                    L->out[L->base[l] + L->g[l]][12] = L->x[12][l] + frac[l] * L->tay[1][12][l];
-                    L->out[L->base[l] + L->g[l]][13] = L->x[13][l] + frac[l] * L->tay[1][13][l];
-                    L->out[L->base[l] + L->g[l]][14] = L->x[14][l] + frac[l] * L->tay[1][14][l];
                     L->g[l] = L->g[l] + 1;
                 }
             }
@@ -8824,18 +8891,21 @@ static int dopri5_grid(long ntimes, const double *times, double *x, const double
                         1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
             }
         }
-        if (due) {
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
+        for (;;) {
+            due = due && (g < ntimes && times[g] < t);
+            if (!due) {
+                break;
+            }
+            if (due) {
                 frac = (times[g] - told) / hs;
                 for (i = 0; i < VSCMG3_NX; ++i) {
-                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                    y[i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
                             (dense[2][i] + (1.0 - frac) * dense[3][i])));
+                }
+            }
+            if (due) {
+                for (i = 0; i < VSCMG3_NX; ++i) {
+                    out[g][i] = y[i];
                 }
                 g = g + 1;
             }
@@ -9439,19 +9509,22 @@ static int dop853_grid(long ntimes, const double *times, double *x, const double
                         39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
             }
         }
-        if (due) {
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
+        for (;;) {
+            due = due && (g < ntimes && times[g] < t);
+            if (!due) {
+                break;
+            }
+            if (due) {
                 frac = (times[g] - told) / hs;
                 for (i = 0; i < VSCMG3_NX; ++i) {
-                    out[g][i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
+                    y[i] = x[i] + frac * (dense[0][i] + (1.0 - frac) * (dense[1][i] + frac *
                             (dense[2][i] + (1.0 - frac) * (dense[3][i] + frac * (dense[4][i] +
                             (1.0 - frac) * (dense[5][i] + frac * dense[6][i]))))));
+                }
+            }
+            if (due) {
+                for (i = 0; i < VSCMG3_NX; ++i) {
+                    out[g][i] = y[i];
                 }
                 g = g + 1;
             }
@@ -13813,14 +13886,12 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
         stats->rejected = stats->rejected + (retry ? 1 : 0);
         cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
         due = ok && (g < ntimes && times[g] < t);
-        if (due) {
-            for (;;) {
-                if (!(g < ntimes)) {
-                    break;
-                }
-                if (!(times[g] < t)) {
-                    break;
-                }
+        for (;;) {
+            due = due && (g < ntimes && times[g] < t);
+            if (!due) {
+                break;
+            }
+            if (due) {
                 frac = times[g] - told;
                 for (i = 0; i < 12; ++i) {
                     acc[i] = tay[order][i];
@@ -13831,11 +13902,16 @@ static int taylor_grid(long ntimes, const double *times, double *x, const double
                     }
                 }
                 for (i = 0; i < 12; ++i) {
-                    out[g][i] = x[i] + frac * acc[i];
+                    acc[i] = x[i] + frac * acc[i];
                 }
-                out[g][12] = x[12] + frac * tay[1][12];
-                out[g][13] = x[13] + frac * tay[1][13];
-                out[g][14] = x[14] + frac * tay[1][14];
+                acc[12] = x[12] + frac * tay[1][12];
+                acc[13] = x[13] + frac * tay[1][13];
+                acc[14] = x[14] + frac * tay[1][14];
+            }
+            if (due) {
+                for (i = 0; i < VSCMG3_NX; ++i) {
+                    out[g][i] = acc[i];
+                }
                 g = g + 1;
             }
         }

@@ -229,6 +229,9 @@ class Interpolant:
     method sets again before it reads them (If.own: over lanes, set on
     every lane with no selection, their values on a lane with no grid time
     in its step never read)."""
+    buffer: str = "y"
+    """An array of NX the method sets again before it reads it, which a
+    branch-free step's grid values go through on their way to out (swept)."""
 
 
 Points = Callable[[E, Callable[[E], At]], list[S]]
@@ -293,13 +296,31 @@ def writes(dense: Interpolant, at: Callable[[E], E], until: E, row: E) -> S:
 def passed(ok: E, dense: Interpolant, end: E, start: E, step: E, row: E = G) -> list[S]:
     """inside for a branch-free step (a pair's, the Taylor method's), after
     its selections, t its end: statements each under ok, as the lanes print
-    them (values by selection, the rhs when any lane needs it, the grid's
-    writes lane by lane): due := ok and a grid time inside the step, the
-    coefficients and the grid times written when due (row: out's row of g,
-    BASE + g over lanes). The step's acceptance and reached follow."""
+    them (values by selection, the rhs when any lane needs it): due := ok
+    and a grid time inside the step, the coefficients when due, then the
+    grid times (swept; row: out's row of g, BASE + g over lanes). The step's
+    acceptance and reached follow."""
     at = theta_at(dense, end, start, step)
-    coefficients = [If(DUE, dense.coefficients, own=dense.scratch)] if dense.coefficients else []
-    return [assign(DUE, and_(ok, due(end))), *coefficients, If(DUE, (writes(dense, at, end, row),))]
+    own = dense.scratch
+    coefficients = [If(DUE, dense.coefficients, own=own)] if dense.coefficients else []
+    return [assign(DUE, and_(ok, due(end))), *coefficients, swept(dense, at, end, row)]
+
+
+def swept(dense: Interpolant, at: Callable[[E], E], until: E, row: E) -> S:
+    """writes for a branch-free step, one grid time a turn while due (due
+    := due and a grid time before until): the interpolant there into its
+    buffer, then the buffer into out[row], g moved on. Over lanes a turn
+    runs while any lane is due: the interpolant at every lane's time at
+    once (a lane not due keeps its frac by selection; the buffer is set on
+    every lane), the rows written lane by lane (out is every lane's)."""
+    y = Var(dense.buffer)
+    return Loop((
+        assign(DUE, and_(DUE, due(until))),
+        If(not_(DUE), (Break(),)),
+        If(DUE, (assign(Var("frac"), at(TIMES[G])), *dense.points(Var("frac"), lambda i: y[i])),
+           own=(y.name,)),
+        If(DUE, (For("i", NX, (assign(OUT[row, i], y[i]),)), inc(G, 1))),
+    ))  # fmt: skip
 
 
 # Events

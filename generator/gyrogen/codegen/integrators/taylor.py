@@ -157,7 +157,7 @@ def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
             out.append(assign(at(Int(n)), x[Int(n)] + tau * low))
         return out
 
-    return driver.Interpolant((), points, scaled=False)
+    return driver.Interpolant((), points, scaled=False, buffer="acc")
 
 
 def step(

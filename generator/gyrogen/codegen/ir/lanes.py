@@ -17,6 +17,7 @@ from gyrogen.codegen.ir.nodes import (
     Assign,
     At,
     Bin,
+    Break,
     Call,
     Comment,
     Decl,
@@ -229,6 +230,8 @@ class LanesPrinter(CPrinter):
             times = self.lane_loop(depth, [f"{pad}{self.indent}L->ts[l] = {self.expr(t)};"], True)
             args = ", ".join(self.expr(a) for a in (x, c, out))
             return [*times, f"{pad}{s.name}_lanes(L->ts, {args});"]
+        if isinstance(s, Loop):
+            return self.turns(s, depth)
         assert isinstance(s, If) and not s.orelse, s
         any_lane = self.lane_loop(depth, [f"{pad}{self.indent}need |= {self.expr(s.cond)};"], True)
         if self.lane_by_lane(s):
@@ -240,6 +243,31 @@ class LanesPrinter(CPrinter):
             *any_lane,
             f"{pad}if (need) {{",
             *self.block(tuple(converted(s.then, s.cond, scratch=frozenset(s.own))), depth + 1),
+            f"{pad}}}",
+        ]
+
+    def turns(self, s: Loop, depth: int) -> list[str]:
+        """A loop whose turn starts go := go and ..., then breaks where not
+        go (go stays false on a lane once false): its turns run while any
+        lane goes on, the rest of a turn under go (every value by
+        selection, a branch's own arrays as they are, a branch writing
+        what every lane shares lane by lane)."""
+        pad, step = self.indent * depth, self.indent
+        first, guard, *rest = s.body
+        assert isinstance(first, Assign) and isinstance(first.target, Var), first
+        go = first.target
+        assert go.name in names(first.value) and guard == If(not_(go), (Break(),)), s
+        any_lane = self.lane_loop(depth + 1, [f"{pad}{step * 2}need |= {self.expr(go)};"], True)
+        body = converted(rest, top=True, keep=self.lane_by_lane)
+        return [
+            f"{pad}for (;;) {{",
+            *self.block((first,), depth + 1),
+            f"{pad}{step}need = 0;",
+            *any_lane,
+            f"{pad}{step}if (!need) {{",
+            f"{pad}{step * 2}break;",
+            f"{pad}{step}}}",
+            *self.block(tuple(body), depth + 1),
             f"{pad}}}",
         ]
 
@@ -280,8 +308,9 @@ class LanesPrinter(CPrinter):
         ]
         loops = sorted({s.var for s in walk_for(func.body)} | {"l"})
         locals_.append(f"int {', '.join(loops)};")
-        if any(isinstance(s, If) and (any(isinstance(x, Call) for x in s.then)
-                                      or p.lane_by_lane(s)) for s in func.body):  # fmt: skip
+        if any(isinstance(s, Loop) or (isinstance(s, If) and (
+                any(isinstance(x, Call) for x in s.then) or p.lane_by_lane(s)))
+               for s in func.body):  # fmt: skip
             locals_.append("int need;")
         doc = [f"/* {d} */" for d in func.doc[:1]]
         body = p.block(func.body, 1)
