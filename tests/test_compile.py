@@ -249,6 +249,37 @@ def test_relative_cache_root_is_made_absolute(
     assert cache.cache_root() == tmp_path / "xdg" / "gyrogen"
 
 
+@pytest.mark.slow
+def test_both_languages_build_at_once_under_a_relative_cache(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """build_dir builds C and Fortran in threads, each with cffi's compile,
+    which changes the working directory: with GYROGEN_CACHE and the sources
+    relative, both builds land in that cache and load, and this process's
+    working directory never moves."""
+    from gyrogen.runtime.scene_build import build_dir
+
+    src = _fresh(source_dir, tmp_path, "relative")
+    with open(src / "gyrostat.f90", "a") as fh:
+        fh.write("! relative\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("GYROGEN_CACHE", "cache")
+    moved: list[object] = []
+    real_chdir = os.chdir
+
+    def chdir(path: object) -> None:  # cffi's compile calls it, in whatever process runs it
+        moved.append(path)
+        real_chdir(path)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(os, "chdir", chdir)
+    built = build_dir(Path(src.name), ["c", "fortran"])
+    assert {lang: b.language for lang, b in built.items()} == {"c": "c", "fortran": "fortran"}
+    assert moved == []
+    keys = {build._plan(src, lang).key for lang in ("c", "fortran")}
+    assert keys <= {p.name for p in (tmp_path / "cache").iterdir()}
+    assert sorted(tmp_path.rglob("cache")) == [tmp_path / "cache"]
+
+
 def test_no_home_directory_asks_for_gyrogen_cache(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -11,16 +11,12 @@ is kept in the cache's logs.
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
-from collections.abc import Iterator
-from contextlib import contextmanager
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-import cffi
 
 from gyrogen import abi
 from gyrogen.codegen.render import render
@@ -143,8 +139,6 @@ def _compile(plan: _Plan, work: Path, final: Path) -> None:
     """Compile the sources and the cffi module in work, to be renamed final."""
     for src in plan.sources:
         shutil.copy2(src, work / src.name)
-    ffi = cffi.FFI()
-    ffi.cdef(plan.cdef)
     if plan.language == "c":
         objects = []
         for src in (s for s in plan.sources if s.suffix == ".c"):
@@ -152,22 +146,20 @@ def _compile(plan: _Plan, work: Path, final: Path) -> None:
             cmd = [plan.cc, *plan.flags, "-c", "-o", obj.name, src.name]
             _run(cmd, work, cache.log_path(final, src.name))
             objects.append(str(obj))
-        ffi.set_source(plan.module_name, plan.glue, extra_objects=objects, **_openmp_args())
+        options = {"extra_objects": objects, **_openmp_args()}
     else:
         lib = plan.module_name + "_f"
         gf = require("gfortran")
         names = [src.name for src in plan.sources]
         cmd = [gf, *plan.flags, "-shared", "-J", ".", "-o", f"lib{lib}.so", *names]
         _run(cmd, work, cache.log_path(final, names[-1]))
-        ffi.set_source(
-            plan.module_name,
-            plan.glue,
-            libraries=[lib],
-            library_dirs=[str(work)],
-            runtime_library_dirs=[str(final)],
+        options = {
+            "libraries": [lib],
+            "library_dirs": [str(work)],
+            "runtime_library_dirs": [str(final)],
             **_openmp_args(),
-        )
-    _cffi_compile(ffi, work, cache.log_path(final, "cffi"))
+        }
+    _cffi_compile(plan, options, work, cache.log_path(final, "cffi"))
 
 
 def _openmp_args() -> dict[str, list[str]]:
@@ -193,31 +185,38 @@ def _run(cmd: list[str], cwd: Path, log: Path) -> None:
         raise cache.failure(what, proc.stdout, log)
 
 
-@contextmanager
-def _output_to(path: Path) -> Iterator[None]:
-    """File descriptors 1 and 2 (what a compiler run by setuptools writes to)
-    go to path for the duration."""
-    with open(path, "w") as fh:
-        saved = os.dup(1), os.dup(2)
-        try:
-            os.dup2(fh.fileno(), 1)
-            os.dup2(fh.fileno(), 2)
-            yield
-        finally:
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
+_CFFI_COMPILE = """
+import json, sys, cffi
+a = json.load(sys.stdin)
+ffi = cffi.FFI()
+ffi.cdef(a["cdef"])
+ffi.set_source(a["module"], a["glue"], **a["options"])
+ffi.compile(tmpdir=a["tmpdir"], verbose=False)
+"""
+"""cffi's compile, run in a Python of its own: it changes the working
+directory (setuptools runs the compiler from tmpdir), which in this process
+would move every relative path under the feet of the other language's
+build (build_dir builds them at once)."""
 
 
-def _cffi_compile(ffi: cffi.FFI, work: Path, log: Path) -> None:
-    """cffi runs the compiler through setuptools; keep its chatter off the
-    terminal, and show the start of it when the glue does not compile."""
+def _cffi_compile(plan: _Plan, options: dict[str, list[str]], work: Path, log: Path) -> None:
+    """cffi runs the compiler through setuptools, in another process; keep
+    its chatter off the terminal, and show the start of it when the glue
+    does not compile."""
     chatter = work / "cffi.log"
-    try:
-        with _output_to(chatter):
-            ffi.compile(tmpdir=str(work), verbose=False)
-    except Exception as exc:
-        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+    job = {"cdef": plan.cdef, "module": plan.module_name, "glue": plan.glue,
+           "options": options, "tmpdir": str(work)}  # fmt: skip
+    with open(chatter, "w") as out:
+        proc = subprocess.run(
+            [sys.executable, "-c", _CFFI_COMPILE],
+            input=json.dumps(job),
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            text=True,
+            check=False,
+        )
+    if proc.returncode != 0:
         output = chatter.read_text(encoding="utf-8", errors="replace")
-        raise cache.failure(f"cffi could not build the glue module ({first})", output, log) from exc
+        lines = [line for line in output.splitlines() if line.strip()]
+        first = lines[-1] if lines else f"exit status {proc.returncode}"
+        raise cache.failure(f"cffi could not build the glue module ({first})", output, log)
