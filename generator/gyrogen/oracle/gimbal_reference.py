@@ -246,9 +246,10 @@ def derivatives(
     h = _momenta(v, f, w_G, w)
     omega = relative_spin(v, gam, w_A, w, f)
     w_dot = (u_s - v.b * omega) / v.J
-    s = _skew(f.g_g)
-    k_dot = rate[..., None, None] * (s @ f.K - f.K @ s)  # K' in A
-    k_dot_w = _apply(k_dot, w_G)
+    # K' w_G, K' = gd (S K - K S) in A: gd (g_g x K w_G - K (g_g x w_G)),
+    # products of a matrix and a vector (two 3x3 matrix products cost 5x more)
+    turned = np.cross(f.g_g, _apply(f.K, w_G)) - _apply(f.K, np.cross(f.g_g, w_G))
+    k_dot_w = rate[..., None] * turned
     total = w_A @ point_inertia(v).T + h.sum(1)
     spin = v.J[:, None] * (w_dot[..., None] * f.g_s + (w * rate)[..., None] * f.g_t)
     m, n = gam.shape
@@ -265,12 +266,3 @@ def derivatives(
     rhs[:, 3:] = np.where(v.has_gimbal, torque, 0.0)
     acc = np.linalg.solve(mat, rhs[..., None])[..., 0]
     return acc[:, :3], rate, acc[:, 3:], w_dot
-
-
-def _skew(a: np.ndarray) -> np.ndarray:
-    """[a x] (..., 3, 3)."""
-    out = np.zeros((*a.shape, 3))
-    out[..., 0, 1], out[..., 0, 2] = -a[..., 2], a[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = a[..., 2], -a[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -a[..., 1], a[..., 0]
-    return out
