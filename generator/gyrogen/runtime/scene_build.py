@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 import gyrogen
 from gyrogen.errors import GyrogenError
 from gyrogen.files import write_atomic
-from gyrogen.runtime.build import build
+from gyrogen.runtime.build import Halt, build
 from gyrogen.runtime.cache import cache_dir
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import Scene
@@ -126,9 +126,14 @@ def build_dir(
     wanted = list(dict.fromkeys(languages))
     if len(wanted) < 2:
         return {language: build(directory, language, portable) for language in wanted}
+    halt = Halt()  # set when this thread is interrupted: the others' compilers end too
     with ThreadPoolExecutor(len(wanted)) as pool:
-        futures = {lang: pool.submit(build, directory, lang, portable) for lang in wanted}
-        return {language: future.result() for language, future in futures.items()}
+        futures = {lang: pool.submit(build, directory, lang, portable, halt) for lang in wanted}
+        try:
+            return {language: future.result() for language, future in futures.items()}
+        except BaseException:
+            halt.set()
+            raise
 
 
 def build_files(
