@@ -249,6 +249,91 @@ def test_relative_cache_root_is_made_absolute(
     assert cache.cache_root() == tmp_path / "xdg" / "gyrogen"
 
 
+@pytest.mark.slow
+def test_both_languages_build_at_once_under_a_relative_cache(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """build_dir builds C and Fortran in threads, each with cffi's compile,
+    which changes the working directory: with GYROGEN_CACHE and the sources
+    relative, both builds land in that cache and load, and this process's
+    working directory never moves."""
+    from gyrogen.runtime.scene_build import build_dir
+
+    src = _fresh(source_dir, tmp_path, "relative")
+    with open(src / "gyrostat.f90", "a") as fh:
+        fh.write("! relative\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("GYROGEN_CACHE", "cache")
+    moved: list[object] = []
+    real_chdir = os.chdir
+
+    def chdir(path: object) -> None:  # cffi's compile calls it, in whatever process runs it
+        moved.append(path)
+        real_chdir(path)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(os, "chdir", chdir)
+    built = build_dir(Path(src.name), ["c", "fortran"])
+    assert {lang: b.language for lang, b in built.items()} == {"c": "c", "fortran": "fortran"}
+    assert moved == []
+    keys = {build._plan(src, lang).key for lang in ("c", "fortran")}
+    assert keys <= {p.name for p in (tmp_path / "cache").iterdir()}
+    assert sorted(tmp_path.rglob("cache")) == [tmp_path / "cache"]
+
+
+FAKE_COMPILER = """#!/bin/sh
+case "$*" in
+  *{source}*) sleep 60 & echo $! > "{pids}/$(basename "$0")"; wait; exit 1 ;;
+esac
+exec {real} "$@"
+"""
+
+
+def _gone(pid: int) -> bool:
+    """No such process, or one killed and not yet reaped."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"
+    except OSError:
+        return True
+
+
+@pytest.mark.slow
+def test_an_interrupted_build_ends_the_other_languages_compiler(
+    source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """build_dir's main thread interrupted (Ctrl-C) while C and Fortran
+    build in threads: each compiler ends at once, with what it started, and
+    the cache holds no entry, no half-built directory and no log."""
+    import signal
+    import threading
+
+    from gyrogen.runtime.scene_build import build_dir
+
+    src = _fresh(source_dir, tmp_path, "interrupted")
+    with open(src / "gyrostat.f90", "a") as fh:
+        fh.write("! interrupted\n")
+    fake, pids = tmp_path / "bin", tmp_path / "pids"
+    fake.mkdir(), pids.mkdir()
+    for tool, source in (("gcc", "gyrostat.c"), ("gfortran", "gyrostat.f90")):
+        real = shutil.which(tool)
+        assert real is not None
+        (fake / tool).write_text(FAKE_COMPILER.format(source=source, pids=pids, real=real))
+        (fake / tool).chmod(0o755)
+    monkeypatch.setenv("PATH", f"{fake}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+
+    def interrupt_when_both_compile() -> None:
+        while len(list(pids.iterdir())) < 2:
+            threading.Event().wait(0.05)
+        os.kill(os.getpid(), signal.SIGINT)  # as a terminal's Ctrl-C: the main thread's
+
+    threading.Thread(target=interrupt_when_both_compile, daemon=True).start()
+    with pytest.raises(KeyboardInterrupt):
+        build_dir(src, ["c", "fortran"])
+    sleepers = [int(p.read_text()) for p in pids.iterdir()]
+    assert len(sleepers) == 2 and all(_gone(pid) for pid in sleepers)
+    assert list((tmp_path / "cache").iterdir()) == []
+
+
 def test_no_home_directory_asks_for_gyrogen_cache(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

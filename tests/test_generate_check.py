@@ -143,3 +143,27 @@ def test_the_pairs_of_a_function_measure_each_rows_term_sizes_once() -> None:
     shared = [compare.size_scaled_error(v, ref, f, x, p, sizes) for v in (a, b)]
     k = seen[0]  # the suspect rows: f at them, at each moved state, at each moved parameter
     assert shared == alone and seen == [k, 2 * k, k] and k > 30
+
+
+def test_term_sizes_read_the_values_the_comparison_has() -> None:
+    """Given f's values at every state (a comparison has them), TermSizes
+    asks f only at the moved states and parameters, and measures the same S."""
+    seen: list[int] = []
+
+    def f(xs: np.ndarray, q: np.ndarray) -> np.ndarray:
+        seen.append(len(xs))
+        return np.column_stack([xs[:, 0] * q[0] - xs[:, 1], xs[:, 1] ** 2])
+
+    x = np.random.default_rng(4).normal(size=(40, 2))
+    p = np.array([1.5])
+    ref = f(x, p)
+    a = ref * (1 + 1e-13)  # every row suspect
+    rows = np.arange(len(x))
+    asked = compare.TermSizes(f, x, p).at(rows)
+    seen.clear()
+    given = compare.TermSizes(f, x, p, ref).at(rows)
+    assert seen == [2 * len(x), len(x)]  # the moved states, the moved parameter
+    assert np.array_equal(given, asked)
+    assert compare.size_scaled_error(a, ref, f, x, p, compare.TermSizes(f, x, p, ref)) == (
+        compare.size_scaled_error(a, ref, f, x, p)
+    )

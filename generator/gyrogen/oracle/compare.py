@@ -62,10 +62,13 @@ Function = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """(states (n, nx), runtime parameters) -> values (n, m), vectorized."""
 
 
-def term_sizes(f: Function, states: np.ndarray, p: np.ndarray) -> np.ndarray:
+def term_sizes(
+    f: Function, states: np.ndarray, p: np.ndarray, base: np.ndarray | None = None
+) -> np.ndarray:
     """S for each value of f at each state: sum_j |df/dv_j| |v_j| over the
-    states' entries and the runtime parameters, by forward differences."""
-    base = f(states, p)
+    states' entries and the runtime parameters, by forward differences
+    (base: f's values at the states, if the caller has them)."""
+    base = f(states, p) if base is None else base
     size = np.zeros_like(base)
     nx = states.shape[1]
     moved = np.repeat(states[None], nx, axis=0)
@@ -94,17 +97,22 @@ CHUNK = 20_000
 
 class TermSizes:
     """S of f's values at states' rows (term_sizes), each row measured once
-    however many comparisons ask for it (a function's pairs share them)."""
+    however many comparisons ask for it (a function's pairs share them);
+    values: f at every state, if the caller has them (then f is not asked
+    again at the rows)."""
 
-    def __init__(self, f: Function, states: np.ndarray, p: np.ndarray) -> None:
-        self.f, self.states, self.p = f, states, p
+    def __init__(
+        self, f: Function, states: np.ndarray, p: np.ndarray, values: np.ndarray | None = None
+    ) -> None:
+        self.f, self.states, self.p, self.values = f, states, p, values
         self.known = np.zeros(len(states), dtype=bool)
         self.sizes: np.ndarray | None = None
 
     def at(self, rows: np.ndarray) -> np.ndarray:
         new = rows[~self.known[rows]]
         if len(new):
-            measured = term_sizes(self.f, self.states[new], self.p)
+            base = None if self.values is None else self.values[new]
+            measured = term_sizes(self.f, self.states[new], self.p, base)
             if self.sizes is None:
                 self.sizes = np.zeros((len(self.states), measured.shape[1]))
             self.sizes[new], self.known[new] = measured, True
@@ -250,7 +258,7 @@ def _pairs(
     for name in names:
         tag = "" if name == "rhs" else f" {name}"
         f = _reference(scene, name, t)
-        ref = f(states, p)
+        ref = values = f(states, p)
         if name == "rhs":
             out = {_label(b): b.rhs(states, constants[_label(b)], t) for b in backends}
         elif name == "events":  # NaN where the reference's is NaN too is agreement
@@ -260,7 +268,7 @@ def _pairs(
             ref = np.where(np.any(list(both.values()), axis=0), 0.0, ref)
         else:
             out = {_label(b): b.output(name, states, constants[_label(b)], t) for b in backends}
-        sizes = TermSizes(f, states, p)  # one measure of a row's S for every pair
+        sizes = TermSizes(f, states, p, values)  # one measure of a row's S for every pair
         for label, value in out.items():
             err = size_scaled_error(value, ref, f, states, p, sizes)
             yield f"{label} vs reference{tag}", err

@@ -10,17 +10,17 @@ is kept in the cache's logs.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
+import signal
 import subprocess
-from collections.abc import Iterator
-from contextlib import contextmanager
+import sys
+import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
-
-import cffi
+from typing import IO, Any
 
 from gyrogen import abi
 from gyrogen.codegen.render import render
@@ -58,14 +58,19 @@ class _Plan:
         return f"_gyrogen_{self.manifest['prefix']}_{self.language}_{self.key}"
 
 
-def build(source_dir: Path, language: Language, portable: bool = False) -> Compiled:
+def build(
+    source_dir: Path, language: Language, portable: bool = False, halt: Halt | None = None
+) -> Compiled:
     """Compile (or fetch from the cache) and load one backend of the
     generated sources in source_dir (which holds manifest.json); portable:
     for any CPU of the architecture (runtime/flags.py), whatever the
-    environment says."""
+    environment says. halt: once set, the compiler running is ended and the
+    build raises Stopped (another thread's Ctrl-C: build_dir)."""
     plan = _plan(Path(source_dir), language, portable)
     entry = cache.cache_dir() / plan.key
-    module = cache.fetch(plan.module_name, entry, lambda work, final: _compile(plan, work, final))
+    module = cache.fetch(
+        plan.module_name, entry, lambda work, final: _compile(plan, work, final, halt)
+    )
     return Compiled(language, plan.manifest, module.ffi, module.lib)
 
 
@@ -139,35 +144,31 @@ def _key(
     return cache.entry_key((language, _tool_version(tool), " ".join(used), glue, cdef), sources)
 
 
-def _compile(plan: _Plan, work: Path, final: Path) -> None:
+def _compile(plan: _Plan, work: Path, final: Path, halt: Halt | None = None) -> None:
     """Compile the sources and the cffi module in work, to be renamed final."""
     for src in plan.sources:
         shutil.copy2(src, work / src.name)
-    ffi = cffi.FFI()
-    ffi.cdef(plan.cdef)
     if plan.language == "c":
         objects = []
         for src in (s for s in plan.sources if s.suffix == ".c"):
             obj = work / f"{src.stem}.o"
             cmd = [plan.cc, *plan.flags, "-c", "-o", obj.name, src.name]
-            _run(cmd, work, cache.log_path(final, src.name))
+            _run(cmd, work, cache.log_path(final, src.name), halt)
             objects.append(str(obj))
-        ffi.set_source(plan.module_name, plan.glue, extra_objects=objects, **_openmp_args())
+        options = {"extra_objects": objects, **_openmp_args()}
     else:
         lib = plan.module_name + "_f"
         gf = require("gfortran")
         names = [src.name for src in plan.sources]
         cmd = [gf, *plan.flags, "-shared", "-J", ".", "-o", f"lib{lib}.so", *names]
-        _run(cmd, work, cache.log_path(final, names[-1]))
-        ffi.set_source(
-            plan.module_name,
-            plan.glue,
-            libraries=[lib],
-            library_dirs=[str(work)],
-            runtime_library_dirs=[str(final)],
+        _run(cmd, work, cache.log_path(final, names[-1]), halt)
+        options = {
+            "libraries": [lib],
+            "library_dirs": [str(work)],
+            "runtime_library_dirs": [str(final)],
             **_openmp_args(),
-        )
-    _cffi_compile(ffi, work, cache.log_path(final, "cffi"))
+        }
+    _cffi_compile(plan, options, work, cache.log_path(final, "cffi"), halt)
 
 
 def _openmp_args() -> dict[str, list[str]]:
@@ -178,46 +179,82 @@ def _openmp_args() -> dict[str, list[str]]:
     return {"extra_compile_args": [flags.OPENMP], "extra_link_args": [flags.OPENMP]}
 
 
-def _run(cmd: list[str], cwd: Path, log: Path) -> None:
-    proc = subprocess.run(
-        cmd,
-        cwd=cwd,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        encoding="utf-8",
-        errors="replace",
-        check=False,
-    )
-    if proc.returncode != 0:
-        what = f"{Path(cmd[0]).name} failed on {cmd[-1]} (exit status {proc.returncode})"
-        raise cache.failure(what, proc.stdout, log)
+Halt = threading.Event
+"""Set: stop building (build_dir's main thread was interrupted)."""
+POLL = 0.1
+"""Seconds between a running compiler's looks at its Halt."""
 
 
-@contextmanager
-def _output_to(path: Path) -> Iterator[None]:
-    """File descriptors 1 and 2 (what a compiler run by setuptools writes to)
-    go to path for the duration."""
-    with open(path, "w") as fh:
-        saved = os.dup(1), os.dup(2)
-        try:
-            os.dup2(fh.fileno(), 1)
-            os.dup2(fh.fileno(), 2)
-            yield
-        finally:
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
+class Stopped(BuildError):
+    """A build ended by its Halt: nothing failed, nothing to report."""
 
 
-def _cffi_compile(ffi: cffi.FFI, work: Path, log: Path) -> None:
-    """cffi runs the compiler through setuptools; keep its chatter off the
-    terminal, and show the start of it when the glue does not compile."""
-    chatter = work / "cffi.log"
+def _child(
+    cmd: list[str],
+    cwd: Path | None,
+    out: int | IO[str],
+    halt: Halt | None,
+    given: str | None = None,
+) -> tuple[int, str]:
+    """cmd's exit status and output (out: PIPE for it, or a file), given on
+    its stdin; killed with what it started (a compiler driver's cc1 and as:
+    a process group of its own) if anything interrupts the wait, and
+    Stopped raised once halt is set."""
+    if halt is not None and halt.is_set():
+        raise Stopped(f"stopped before {Path(cmd[0]).name}")
+    stdin = subprocess.PIPE if given is not None else None
+    proc = subprocess.Popen(cmd, cwd=cwd, stdin=stdin, stdout=out, stderr=subprocess.STDOUT,
+                            encoding="utf-8", errors="replace", process_group=0)  # fmt: skip
     try:
-        with _output_to(chatter):
-            ffi.compile(tmpdir=str(work), verbose=False)
-    except Exception as exc:
-        first = (str(exc).splitlines() or [type(exc).__name__])[0]
+        while True:
+            try:
+                output, _ = proc.communicate(given, timeout=None if halt is None else POLL)
+                return proc.returncode, output or ""
+            except subprocess.TimeoutExpired:
+                given = None  # written already: communicate goes on where it was
+                if halt is not None and halt.is_set():
+                    raise Stopped(f"stopped {Path(cmd[0]).name}") from None
+    finally:
+        if proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+
+
+def _run(cmd: list[str], cwd: Path, log: Path, halt: Halt | None = None) -> None:
+    code, output = _child(cmd, cwd, subprocess.PIPE, halt)
+    if code != 0:
+        what = f"{Path(cmd[0]).name} failed on {cmd[-1]} (exit status {code})"
+        raise cache.failure(what, output, log)
+
+
+_CFFI_COMPILE = """
+import json, sys, cffi
+a = json.load(sys.stdin)
+ffi = cffi.FFI()
+ffi.cdef(a["cdef"])
+ffi.set_source(a["module"], a["glue"], **a["options"])
+ffi.compile(tmpdir=a["tmpdir"], verbose=False)
+"""
+"""cffi's compile, run in a Python of its own: it changes the working
+directory (setuptools runs the compiler from tmpdir), which in this process
+would move every relative path under the feet of the other language's
+build (build_dir builds them at once)."""
+
+
+def _cffi_compile(
+    plan: _Plan, options: dict[str, list[str]], work: Path, log: Path, halt: Halt | None = None
+) -> None:
+    """cffi runs the compiler through setuptools, in another process; keep
+    its chatter off the terminal, and show the start of it when the glue
+    does not compile."""
+    chatter = work / "cffi.log"
+    job = {"cdef": plan.cdef, "module": plan.module_name, "glue": plan.glue,
+           "options": options, "tmpdir": str(work)}  # fmt: skip
+    with open(chatter, "w") as out:
+        code, _ = _child([sys.executable, "-c", _CFFI_COMPILE], None, out, halt, json.dumps(job))
+    if code != 0:
         output = chatter.read_text(encoding="utf-8", errors="replace")
-        raise cache.failure(f"cffi could not build the glue module ({first})", output, log) from exc
+        lines = [line for line in output.splitlines() if line.strip()]
+        first = lines[-1] if lines else f"exit status {code}"
+        raise cache.failure(f"cffi could not build the glue module ({first})", output, log)

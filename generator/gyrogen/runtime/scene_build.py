@@ -23,6 +23,7 @@ import os
 import tempfile
 import threading
 from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import suppress
 from dataclasses import dataclass
 from functools import cache, cached_property
@@ -33,7 +34,7 @@ from typing import TYPE_CHECKING
 import gyrogen
 from gyrogen.errors import GyrogenError
 from gyrogen.files import write_atomic
-from gyrogen.runtime.build import build
+from gyrogen.runtime.build import Halt, build
 from gyrogen.runtime.cache import cache_dir
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import Scene
@@ -119,8 +120,20 @@ def scene_sources(scene: Scene, portable: bool = False) -> Sources:
 def build_dir(
     directory: Path, languages: Iterable[Language], portable: bool = False
 ) -> dict[Language, Compiled]:
-    """The sources in directory built (or fetched from the cache), by language."""
-    return {language: build(directory, language, portable) for language in languages}
+    """The sources in directory built (or fetched from the cache), by
+    language: the languages at once, each in a thread (their compilers are
+    other processes, and so is cffi's compile: runtime/build.py)."""
+    wanted = list(dict.fromkeys(languages))
+    if len(wanted) < 2:
+        return {language: build(directory, language, portable) for language in wanted}
+    halt = Halt()  # set when this thread is interrupted: the others' compilers end too
+    with ThreadPoolExecutor(len(wanted)) as pool:
+        futures = {lang: pool.submit(build, directory, lang, portable, halt) for lang in wanted}
+        try:
+            return {language: future.result() for language, future in futures.items()}
+        except BaseException:
+            halt.set()
+            raise
 
 
 def build_files(
@@ -145,7 +158,7 @@ def build_scene(
     written: Callable[[SceneContext], None] = lambda unit: None,
 ) -> tuple[SceneContext, dict[Language, Compiled]]:
     """Render scene into directory (all or nothing), call written with its
-    unit, then build each language in turn (or fetch it from the cache):
+    unit, then build the languages (or fetch them from the cache):
     the unit and the backends by language."""
     from gyrogen.codegen.generate import generate  # sympy
 
