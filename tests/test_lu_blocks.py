@@ -285,3 +285,112 @@ def test_generated_lu_shift_touches_only_stored_entries(tmp_path: Path) -> None:
     assert unit is not None and unit.optimized.jacobian is not None and unit.lu_blocks
     shifted_solves(unit.prefix, tmp_path / "src", list(unit.optimized.jacobian.outputs),
                    unit.lu_blocks, tmp_path)  # fmt: skip
+
+
+LANES = """
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#define P_NX {n}
+#define P_NX2 ({n} * {n})
+#define P_LANES {lanes}
+#define P_SIMD
+#define P_RESTRICT
+
+struct lanes {{
+    double e2r[P_NX2][P_LANES], e2i[P_NX2][P_LANES], z2[P_NX][P_LANES], z3[P_NX][P_LANES];
+    int piv2[P_NX][P_LANES], zero_pivot[P_LANES];
+}};
+
+{functions}
+
+/* Reads each lane's ar, ai (row-major), br and bi from stdin; factors and
+   solves each lane's system by the scalar functions and all lanes' by the
+   functions over lanes; prints, a lane a line, whether the scalar
+   decomposition found a zero pivot, whether the lanes' did, and whether
+   the factors, pivots and solution are the same bits. */
+int main(void)
+{{
+    static struct lanes L;
+    double ar[P_NX2], ai[P_NX2], br[P_NX], bi[P_NX];
+    int piv[P_NX], zero[P_LANES], i, l, same;
+    for (l = 0; l < P_LANES; ++l) {{
+        for (i = 0; i < P_NX2; ++i) if (scanf("%lf", &L.e2r[i][l]) != 1) return 2;
+        for (i = 0; i < P_NX2; ++i) if (scanf("%lf", &L.e2i[i][l]) != 1) return 2;
+        for (i = 0; i < P_NX; ++i) if (scanf("%lf", &L.z2[i][l]) != 1) return 2;
+        for (i = 0; i < P_NX; ++i) if (scanf("%lf", &L.z3[i][l]) != 1) return 2;
+        L.zero_pivot[l] = l % 2;  /* or-ed into: E1's, set for odd lanes */
+    }}
+    for (l = 0; l < P_LANES; ++l) zero[l] = L.zero_pivot[l];
+    lu_decompose_complex_lanes(&L);
+    lu_solve_complex_lanes(&L);
+    rewind(stdin);  /* the inputs again, for the scalar functions */
+    for (l = 0; l < P_LANES; ++l) {{
+        int singular;
+        for (i = 0; i < P_NX2; ++i) if (scanf("%lf", &ar[i]) != 1) return 2;
+        for (i = 0; i < P_NX2; ++i) if (scanf("%lf", &ai[i]) != 1) return 2;
+        for (i = 0; i < P_NX; ++i) if (scanf("%lf", &br[i]) != 1) return 2;
+        for (i = 0; i < P_NX; ++i) if (scanf("%lf", &bi[i]) != 1) return 2;
+        singular = lu_decompose_complex(ar, ai, piv);
+        if (!singular) lu_solve_complex(ar, ai, piv, br, bi);
+        same = 1;
+        for (i = 0; i < P_NX2 && !singular; ++i)
+            same &= !memcmp(&ar[i], &L.e2r[i][l], 8) && !memcmp(&ai[i], &L.e2i[i][l], 8);
+        for (i = 0; i < P_NX && !singular; ++i)
+            same &= piv[i] == L.piv2[i][l] && !memcmp(&br[i], &L.z2[i][l], 8)
+                    && !memcmp(&bi[i], &L.z3[i][l], 8);
+        printf("%d %d %d\\n", singular || zero[l], L.zero_pivot[l] != 0, same);
+    }}
+    return 0;
+}}
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["stiff_wheel", "cmg4_pyramid"])
+def test_complex_lu_over_lanes_is_the_scalar_one_bit_for_bit(name: str, tmp_path: Path) -> None:
+    """lu_decompose_complex_lanes and lu_solve_complex_lanes (radau5's E2
+    over lanes, pivots and Smith's division by selection) give each lane the
+    scalar functions' factors, pivots and solution bit for bit, rows
+    exchanged and both cases of the division among the lanes; a lane with a
+    zero pivot has zero_pivot set, and one set before (E1's) stays set."""
+    from gyrogen.codegen.integrators import linear
+    from gyrogen.codegen.ir.c import CPrinter
+    from gyrogen.codegen.ir.lanes import LanesPrinter
+
+    blocks = make_context(load(name)).lu_blocks
+    assert blocks is not None
+    n, lanes = len(blocks.end), 8
+    state = {d.name: d for d in (*linear.lanes_state(), *linear.lanes_state_complex())}
+    over = LanesPrinter("p", "P", {}, state)
+    scalar = CPrinter("p", "P", {})
+    functions = "\n".join([
+        scalar.function(linear.decompose_complex(blocks, n)),
+        scalar.function(linear.solve_complex(blocks, n)),
+        over.function(linear.decompose_complex_lanes(blocks, n)),
+        over.function(linear.solve_complex_lanes(blocks, n)),
+    ])  # fmt: skip
+    harness, exe = tmp_path / "lanes.c", tmp_path / "lanes"
+    harness.write_text(LANES.format(n=n, lanes=lanes, functions=functions))
+    subprocess.run(["gcc", "-std=c99", "-O2", "-o", str(exe), str(harness), "-lm"], check=True)
+    rng = np.random.default_rng(14)
+    given = tmp_path / "given.txt"
+    values = []
+    for lane in range(lanes):
+        ar, ai = block_matrix(blocks, rng), block_matrix(blocks, rng)
+        if lane in (2, 5):  # |im| > |re| on the diagonal: Smith's other case
+            ai[np.diag_indices(n)] = 10.0 * rng.uniform(0.5, 1.0, n)
+        if lane == 6:  # a zero column in the last block: singular
+            ar[:, blocks.spans[-1][0]] = ai[:, blocks.spans[-1][0]] = 0.0
+        br, bi = rng.uniform(-1.0, 1.0, (2, n))
+        values += [*ar.ravel(), *ai.ravel(), *br, *bi]
+    given.write_text(" ".join(repr(float(v)) for v in values))
+    with given.open() as f:
+        out = subprocess.run([str(exe)], stdin=f, capture_output=True, text=True, check=True)
+    rows = [tuple(map(int, line.split())) for line in out.stdout.splitlines()]
+    assert len(rows) == lanes
+    for lane, (zero, zero_lanes, same) in enumerate(rows):
+        assert zero == zero_lanes, lane
+        assert zero == (lane == 6 or lane % 2 == 1), lane
+        assert same, lane

@@ -91,6 +91,8 @@ class Elimination:
     """a_ij -= l_ik u_kj (row i's entry, row k's)."""
     scale: Callable[[Index, Index], tuple[S, ...]]
     """u_kj := u_kj / u_kk (row k's entry, the diagonal)."""
+    pivots: str = "piv"
+    """The pivots' array."""
 
 
 def eliminate(
@@ -145,7 +147,7 @@ def column(
     """Column k of the block [first, end): its pivot, its multipliers and
     the updates of the rows below, row k of U scaled. A number k unrolls
     the rest of the block (k + 1 .. end - 1); a variable loops over it."""
-    piv, kk = Var("piv"), flat(k, k, nx)
+    piv, kk = Var(how.pivots), flat(k, k, nx)
     if isinstance(k, int) and end - k == 1:
         return [
             assign(piv[k], k),
@@ -188,7 +190,7 @@ def pivoting(
     selection: the running largest size in best (the size at p, as the
     search compares), and each row below k exchanged where it is p."""
     start, end = span
-    piv, after = Var("piv"), Int(k + 1) if isinstance(k, int) else k + 1
+    piv, after = Var(how.pivots), Int(k + 1) if isinstance(k, int) else k + 1
     if singular is None:
         assert isinstance(k, int), "a branching pivot search is unrolled"
         return [
@@ -321,15 +323,18 @@ Rows = Callable[[int | E], At | Var]
 """A right-hand side's entry by its row."""
 
 
-def permute_selected(blocks: Blocks, rows: range, b: Rows) -> list[S]:
-    """permute by selection (no index read from piv): each row q below r in
-    its block exchanged with row r where piv[r] is q; one loop over r and q
-    a block (17 loops over q on a block of 15 rows took gcc a quarter of a
-    second)."""
-    piv, q, r, swap = Var("piv"), Var("q"), Var("r"), Var("swap")
+def permute_selected(
+    blocks: Blocks, rows: range, bs: tuple[Rows, ...], pivots: str = "piv"
+) -> list[S]:
+    """permute by selection (no index read from the pivots): each row q
+    below r in its block exchanged with row r where pivots[r] is q, in each
+    of bs; one loop over r and q a block (17 loops over q on a block of 15
+    rows took gcc a quarter of a second)."""
+    piv, q, r, swap = Var(pivots), Var("q"), Var("r"), Var("swap")
     there = cmp(piv[r], "==", q)
-    exchange = (assign(swap, b(r)), assign(b(r), sel(there, b(q), b(r))),
-                assign(b(q), sel(there, swap, b(q))))  # fmt: skip
+    exchange = tuple(st for b in bs for st in (
+        assign(swap, b(r)), assign(b(r), sel(there, b(q), b(r))),
+        assign(b(q), sel(there, swap, b(q)))))  # fmt: skip
     return [
         For("r", Int(end - 1), (For("q", Int(end), exchange, ("swap",), start=r + 1),),
             start=Int(first))
@@ -397,29 +402,42 @@ def solve(blocks: Blocks, nx: int) -> Func:
     return Func("lu_solve", params, tuple(body), None, locals_, doc, restrict=True)
 
 
-def decompose_complex(blocks: Blocks, nx: int) -> Func:
-    """lu_decompose for ar + i ai, stored the same way: the pivot is the entry
-    of largest |re| + |im| (as radau5.f's DECOMC); 1/u_kk by Smith's division."""
-    ar, ai = Var("ar"), Var("ai")
+def complex_(
+    re_name: str, im_name: str, pivots: str = "piv", selected: bool = False
+) -> Elimination:
+    """The complex decomposition's arithmetic on re_name + i im_name: the
+    pivot the entry of largest |re| + |im| (as radau5.f's DECOMC); 1/u_kk by
+    Smith's division, its two cases a branch or (selected, over lanes) a
+    selection of each value, the same arithmetic on each lane."""
+    ar, ai = Var(re_name), Var(im_name)
     re, im, r, d = Var("re"), Var("im"), Var("r"), Var("d")
     lr, li, ur, ui = Var("lr"), Var("li"), Var("ur"), Var("ui")
 
     def inverse(kk: Index) -> tuple[S, ...]:
-        return (
-            Comment("1/u_kk by Smith's division (no overflow in re^2 + im^2)", False),
-            assign(re, ar[kk]),
-            assign(im, ai[kk]),
-            If(cmp(fn("abs", re), ">=", fn("abs", im)), (
+        big = cmp(fn("abs", re), ">=", fn("abs", im))
+        cases: tuple[S, ...] = (
+            If(big, (
                 assign(r, im / re), assign(d, re + im * r),
                 assign(ar[kk], Num(1.0) / d), assign(ai[kk], -r / d),
             ), (
                 assign(r, re / im), assign(d, im + re * r),
                 assign(ar[kk], r / d), assign(ai[kk], Num(-1.0) / d),
             )),
+        ) if not selected else (
+            assign(r, sel(big, im / re, re / im)),
+            assign(d, sel(big, re + im * r, im + re * r)),
+            assign(ar[kk], sel(big, Num(1.0) / d, r / d)),
+            assign(ai[kk], sel(big, -r / d, Num(-1.0) / d)),
         )  # fmt: skip
+        return (
+            Comment("1/u_kk by Smith's division (no overflow in re^2 + im^2)", False),
+            assign(re, ar[kk]),
+            assign(im, ai[kk]),
+            *cases,
+        )
 
-    how = Elimination(
-        names=("ar", "ai"),
+    return Elimination(
+        names=(re_name, im_name),
         size=lambda q: fn("abs", ar[q]) + fn("abs", ai[q]),
         inverse=inverse,
         multiplier=lambda ik, kk: (
@@ -438,53 +456,89 @@ def decompose_complex(blocks: Blocks, nx: int) -> Func:
             assign(ar[kj], ur * ar[kk] - ui * ai[kk]),
             assign(ai[kj], ur * ai[kk] + ui * ar[kk]),
         ),
+        pivots=pivots,
     )  # fmt: skip
+
+
+COMPLEX_LOCALS = ("re", "im", "r", "d", "lr", "li", "ur", "ui")
+"""What complex_'s arithmetic holds."""
+
+
+def decompose_complex(blocks: Blocks, nx: int) -> Func:
+    """lu_decompose for ar + i ai, stored the same way (complex_)."""
     params = (Decl("ar", "double", ("NX2",), "inout"), Decl("ai", "double", ("NX2",), "inout"),
               Decl("piv", "int", ("NX",), "out"))  # fmt: skip
-    names = ("swap", "re", "im", "r", "d", "lr", "li", "ur", "ui")
-    locals_ = (Decl("p", "int"), *(Decl(n, "double") for n in names))
+    locals_ = (Decl("p", "int"), *(Decl(n, "double") for n in ("swap", *COMPLEX_LOCALS)))
     doc = (
         "lu_decompose for the complex matrix ar + i ai, stored the same way: the",
         "pivot is the entry of largest |re| + |im| (as radau5.f's DECOMC).",
     )
-    body = eliminate(blocks, nx, how)
+    body = eliminate(blocks, nx, complex_("ar", "ai"))
     return Func("lu_decompose_complex", params, body, "bool", locals_, doc, restrict=True)
 
 
-def solve_complex(blocks: Blocks, nx: int) -> Func:
-    ar, ai, br, bi, re = (Var(n) for n in ("ar", "ai", "br", "bi", "re"))
+def complex_substitution(
+    blocks: Blocks,
+    nx: int,
+    factors: tuple[Var, Var],
+    b: tuple[Rows, Rows],
+    permuting: Callable[[range], list[S]],
+    stored: tuple[Rows, Rows] | None = None,
+) -> list[S]:
+    """b := A^-1 b for the complex factors (re, im) and b = (re rows, im
+    rows), part by part as substitution: the part's reads of x (real: -J),
+    solved already, subtracted; its rows permuted; then L^-1 and U^-1.
+    stored: where the rows live, when b is a copy (over lanes, registers)."""
+    ar, ai = factors
+    br, bi = b
+    sr, si = stored or b
+    re = Var("re")
     body: list[S] = []
 
-    def minus(value: E, row: int, cols: list[int], part: str, real: bool = False) -> E:
+    def minus(value: E, row: int, cols: list[int], part: str, real: bool = False,
+              at: tuple[Rows, Rows] = b) -> E:  # fmt: skip
+        xr, xi = at
         for c in cols:
             q = row * nx + c
             if real:
-                value = value - ar[q] * (br[c] if part == "re" else bi[c])
+                value = value - ar[q] * (xr(c) if part == "re" else xi(c))
             elif part == "re":
-                value = value - ar[q] * br[c] + ai[q] * bi[c]
+                value = value - ar[q] * xr(c) + ai[q] * xi(c)
             else:
-                value = value - ar[q] * bi[c] - ai[q] * br[c]
+                value = value - ar[q] * xi(c) - ai[q] * xr(c)
         return value
-
-    def forward(r: int, cols: list[int], real: bool = False) -> list[S]:
-        if not cols:
-            return []
-        return [assign(br[r], minus(br[r], r, cols, "re", real)),
-                assign(bi[r], minus(bi[r], r, cols, "im", real))]  # fmt: skip
 
     for first, end in blocks.parts:
         for r in range(first, end):  # the part's reads of x (real: -J), solved already
-            body += forward(r, list(blocks.coupled[r]) if blocks.coupled else [], real=True)
-        body += permute(blocks, range(first, end), (br, bi))
+            cols = list(blocks.coupled[r]) if blocks.coupled else []
+            if cols:
+                body += [assign(sr(r), minus(sr(r), r, cols, "re", True, (sr, si))),
+                         assign(si(r), minus(si(r), r, cols, "im", True, (sr, si)))]  # fmt: skip
+        body += permuting(range(first, end))
+        body += [st for r in range(first, end) if stored
+                 for st in (assign(br(r), sr(r)), assign(bi(r), si(r)))]  # fmt: skip
         for r in range(first, end):
-            body += forward(r, blocks.lower[r])
+            if blocks.lower[r]:
+                body += [assign(br(r), minus(br(r), r, blocks.lower[r], "re")),
+                         assign(bi(r), minus(bi(r), r, blocks.lower[r], "im"))]  # fmt: skip
         for r in range(end - 1, first - 1, -1):
             up, q = list(reversed(blocks.upper[r])), r * nx + r
             body += [
-                assign(re, minus(br[r] * ar[q] - bi[r] * ai[q], r, up, "re")),
-                assign(bi[r], minus(bi[r] * ar[q] + br[r] * ai[q], r, up, "im")),
-                assign(br[r], re),
+                assign(re, minus(br(r) * ar[q] - bi(r) * ai[q], r, up, "re")),
+                assign(bi(r), minus(bi(r) * ar[q] + br(r) * ai[q], r, up, "im")),
+                assign(br(r), re),
             ]
+        body += [st for r in range(first, end) if stored
+                 for st in (assign(sr(r), br(r)), assign(si(r), bi(r)))]  # fmt: skip
+    return body
+
+
+def solve_complex(blocks: Blocks, nx: int) -> Func:
+    ar, ai, br, bi = (Var(n) for n in ("ar", "ai", "br", "bi"))
+    rows: tuple[Rows, Rows] = (lambda r: br[r], lambda r: bi[r])
+    body = complex_substitution(
+        blocks, nx, (ar, ai), rows, lambda rs: permute(blocks, rs, (br, bi))
+    )
     params = (Decl("ar", "double", ("NX2",)), Decl("ai", "double", ("NX2",)),
               Decl("piv", "int", ("NX",)), Decl("br", "double", ("NX",), "inout"),
               Decl("bi", "double", ("NX",), "inout"))  # fmt: skip
@@ -529,10 +583,54 @@ def solve_lanes(blocks: Blocks, nx: int) -> Func:
     def held(r: int | E) -> Var:
         return Var(f"b{r}")
 
-    rows = substitution(blocks, nx, held, lambda rs: permute_selected(blocks, rs, row), row)
+    rows = substitution(blocks, nx, held, lambda rs: permute_selected(blocks, rs, (row,)), row)
     doc = ("lu_solve on every lane's row s of k, its rows exchanged by selection.",)
     locals_ = tuple(Decl(f"b{r}", "double", (), "tmp") for r in range(nx))
     return Func("lu_solve_lanes", (Decl("s", "int"),), tuple(rows), None, locals_, doc)
+
+
+def decompose_complex_lanes(blocks: Blocks, nx: int) -> Func:
+    """lu_decompose_complex on every lane's e2r + i e2i (radau5's E2),
+    branch-free: each lane's pivots (piv2) by selection, Smith's division
+    by selection; a zero pivot is or-ed into ZERO_PIVOT (E1's, by
+    lu_decompose_lanes first: a lane's E1 or E2 singular)."""
+    how = complex_("e2r", "e2i", "piv2", selected=True)
+    body = eliminate(blocks, nx, how, ZERO_PIVOT, True)
+    locals_ = (
+        Decl("p", "int", (), "inout"),
+        *(Decl(n, "double", (), "inout") for n in ("best", *COMPLEX_LOCALS)),
+    )
+    doc = ("lu_decompose_complex on every lane's e2r + i e2i; a zero pivot or-ed into zero_pivot.",)
+    return Func("lu_decompose_complex_lanes", (), body, None, locals_, doc)
+
+
+def solve_complex_lanes(blocks: Blocks, nx: int) -> Func:
+    """lu_solve_complex's statements on every lane's z2 + i z3 (radau5's
+    complex system), the rows exchanged by selection, then solved in
+    registers, as solve_lanes."""
+    z2, z3 = Var("z2"), Var("z3")
+    rows: tuple[Rows, Rows] = (lambda r: z2[r], lambda r: z3[r])
+    held: tuple[Rows, Rows] = (lambda r: Var(f"br{r}"), lambda r: Var(f"bi{r}"))
+    factors = (Var("e2r"), Var("e2i"))
+    body = complex_substitution(
+        blocks, nx, factors, held, lambda rs: permute_selected(blocks, rs, rows, "piv2"), rows
+    )
+    doc = ("lu_solve_complex on every lane's z2 + i z3, its rows exchanged by selection.",)
+    locals_ = (
+        *(Decl(f"b{part}{r}", "double", (), "tmp") for r in range(nx) for part in "ri"),
+        Decl("re", "double", (), "tmp"),
+    )
+    return Func("lu_solve_complex_lanes", (), tuple(body), None, locals_, doc)
+
+
+def lanes_state_complex() -> list[Decl]:
+    """What struct lanes holds for the complex decomposition and its
+    right-hand side, per lane."""
+    return [
+        *(Decl(n, "double", ("NX2",), "inout") for n in ("e2r", "e2i")),
+        Decl("piv2", "int", ("NX",), "inout"),
+        *(Decl(n, "double", ("NX",), "inout") for n in ("z2", "z3")),
+    ]
 
 
 def lanes_state() -> list[Decl]:
@@ -547,6 +645,7 @@ def lanes_state() -> list[Decl]:
 __all__ = [
     "decompose",
     "decompose_complex",
+    "decompose_complex_lanes",
     "decompose_lanes",
     "lanes_state",
     "real",
@@ -554,5 +653,6 @@ __all__ = [
     "shift_complex",
     "solve",
     "solve_complex",
+    "solve_complex_lanes",
     "solve_lanes",
 ]
