@@ -6088,7 +6088,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[CMG4_PYRAMID_LANES];
     double told[CMG4_PYRAMID_LANES];
     double hs[CMG4_PYRAMID_LANES];
-    double frac[CMG4_PYRAMID_LANES];
+    double frac[CMG4_PYRAMID_LANES] = {0};
     int due[CMG4_PYRAMID_LANES];
     static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
@@ -6698,7 +6698,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[CMG4_PYRAMID_LANES];
     double told[CMG4_PYRAMID_LANES];
     double hs[CMG4_PYRAMID_LANES];
-    double frac[CMG4_PYRAMID_LANES];
+    double frac[CMG4_PYRAMID_LANES] = {0};
     int due[CMG4_PYRAMID_LANES];
     static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
@@ -7546,7 +7546,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[CMG4_PYRAMID_LANES];
     int lock[CMG4_PYRAMID_LANES];
     int rej[CMG4_PYRAMID_LANES];
-    double frac[CMG4_PYRAMID_LANES];
+    double frac[CMG4_PYRAMID_LANES] = {0};
     int due[CMG4_PYRAMID_LANES];
     static const double is_angle[18] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};

@@ -1893,7 +1893,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[DUAL_SPIN_LANES];
     double told[DUAL_SPIN_LANES];
     double hs[DUAL_SPIN_LANES];
-    double frac[DUAL_SPIN_LANES];
+    double frac[DUAL_SPIN_LANES] = {0};
     int due[DUAL_SPIN_LANES];
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -2499,7 +2499,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[DUAL_SPIN_LANES];
     double told[DUAL_SPIN_LANES];
     double hs[DUAL_SPIN_LANES];
-    double frac[DUAL_SPIN_LANES];
+    double frac[DUAL_SPIN_LANES] = {0};
     int due[DUAL_SPIN_LANES];
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3343,7 +3343,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[DUAL_SPIN_LANES];
     int lock[DUAL_SPIN_LANES];
     int rej[DUAL_SPIN_LANES];
-    double frac[DUAL_SPIN_LANES];
+    double frac[DUAL_SPIN_LANES] = {0};
     int due[DUAL_SPIN_LANES];
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -4216,7 +4216,7 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double rho[DUAL_SPIN_LANES];
     double h2[DUAL_SPIN_LANES];
     double told[DUAL_SPIN_LANES];
-    double frac[DUAL_SPIN_LANES];
+    double frac[DUAL_SPIN_LANES] = {0};
     int due[DUAL_SPIN_LANES];
     int i, l, q;
     int need;

@@ -2356,7 +2356,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[GYROSTAT_LANES];
     double told[GYROSTAT_LANES];
     double hs[GYROSTAT_LANES];
-    double frac[GYROSTAT_LANES];
+    double frac[GYROSTAT_LANES] = {0};
     int due[GYROSTAT_LANES];
     static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0};
@@ -2964,7 +2964,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[GYROSTAT_LANES];
     double told[GYROSTAT_LANES];
     double hs[GYROSTAT_LANES];
-    double frac[GYROSTAT_LANES];
+    double frac[GYROSTAT_LANES] = {0};
     int due[GYROSTAT_LANES];
     static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0};
@@ -3808,7 +3808,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[GYROSTAT_LANES];
     int lock[GYROSTAT_LANES];
     int rej[GYROSTAT_LANES];
-    double frac[GYROSTAT_LANES];
+    double frac[GYROSTAT_LANES] = {0};
     int due[GYROSTAT_LANES];
     static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0};
@@ -4761,7 +4761,7 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double rho[GYROSTAT_LANES];
     double h2[GYROSTAT_LANES];
     double told[GYROSTAT_LANES];
-    double frac[GYROSTAT_LANES];
+    double frac[GYROSTAT_LANES] = {0};
     int due[GYROSTAT_LANES];
     int i, l, q;
     int need;

@@ -2378,7 +2378,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[RW3_ORTHOGONAL_LANES];
     double told[RW3_ORTHOGONAL_LANES];
     double hs[RW3_ORTHOGONAL_LANES];
-    double frac[RW3_ORTHOGONAL_LANES];
+    double frac[RW3_ORTHOGONAL_LANES] = {0};
     int due[RW3_ORTHOGONAL_LANES];
     static const double is_angle[9] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -2988,7 +2988,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[RW3_ORTHOGONAL_LANES];
     double told[RW3_ORTHOGONAL_LANES];
     double hs[RW3_ORTHOGONAL_LANES];
-    double frac[RW3_ORTHOGONAL_LANES];
+    double frac[RW3_ORTHOGONAL_LANES] = {0};
     int due[RW3_ORTHOGONAL_LANES];
     static const double is_angle[9] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3836,7 +3836,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[RW3_ORTHOGONAL_LANES];
     int lock[RW3_ORTHOGONAL_LANES];
     int rej[RW3_ORTHOGONAL_LANES];
-    double frac[RW3_ORTHOGONAL_LANES];
+    double frac[RW3_ORTHOGONAL_LANES] = {0};
     int due[RW3_ORTHOGONAL_LANES];
     static const double is_angle[9] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -4845,7 +4845,7 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double rho[RW3_ORTHOGONAL_LANES];
     double h2[RW3_ORTHOGONAL_LANES];
     double told[RW3_ORTHOGONAL_LANES];
-    double frac[RW3_ORTHOGONAL_LANES];
+    double frac[RW3_ORTHOGONAL_LANES] = {0};
     int due[RW3_ORTHOGONAL_LANES];
     int i, l, q;
     int need;

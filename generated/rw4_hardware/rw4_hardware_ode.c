@@ -2703,7 +2703,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[RW4_HARDWARE_LANES];
     double told[RW4_HARDWARE_LANES];
     double hs[RW4_HARDWARE_LANES];
-    double frac[RW4_HARDWARE_LANES];
+    double frac[RW4_HARDWARE_LANES] = {0};
     int due[RW4_HARDWARE_LANES];
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3311,7 +3311,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[RW4_HARDWARE_LANES];
     double told[RW4_HARDWARE_LANES];
     double hs[RW4_HARDWARE_LANES];
-    double frac[RW4_HARDWARE_LANES];
+    double frac[RW4_HARDWARE_LANES] = {0};
     int due[RW4_HARDWARE_LANES];
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -4157,7 +4157,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[RW4_HARDWARE_LANES];
     int lock[RW4_HARDWARE_LANES];
     int rej[RW4_HARDWARE_LANES];
-    double frac[RW4_HARDWARE_LANES];
+    double frac[RW4_HARDWARE_LANES] = {0};
     int due[RW4_HARDWARE_LANES];
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;

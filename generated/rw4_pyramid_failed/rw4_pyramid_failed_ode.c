@@ -2681,7 +2681,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[RW4_PYRAMID_FAILED_LANES];
     double told[RW4_PYRAMID_FAILED_LANES];
     double hs[RW4_PYRAMID_FAILED_LANES];
-    double frac[RW4_PYRAMID_FAILED_LANES];
+    double frac[RW4_PYRAMID_FAILED_LANES] = {0};
     int due[RW4_PYRAMID_FAILED_LANES];
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3292,7 +3292,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[RW4_PYRAMID_FAILED_LANES];
     double told[RW4_PYRAMID_FAILED_LANES];
     double hs[RW4_PYRAMID_FAILED_LANES];
-    double frac[RW4_PYRAMID_FAILED_LANES];
+    double frac[RW4_PYRAMID_FAILED_LANES] = {0};
     int due[RW4_PYRAMID_FAILED_LANES];
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -4142,7 +4142,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[RW4_PYRAMID_FAILED_LANES];
     int lock[RW4_PYRAMID_FAILED_LANES];
     int rej[RW4_PYRAMID_FAILED_LANES];
-    double frac[RW4_PYRAMID_FAILED_LANES];
+    double frac[RW4_PYRAMID_FAILED_LANES] = {0};
     int due[RW4_PYRAMID_FAILED_LANES];
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;

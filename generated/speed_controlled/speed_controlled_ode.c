@@ -2028,7 +2028,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[SPEED_CONTROLLED_LANES];
     double told[SPEED_CONTROLLED_LANES];
     double hs[SPEED_CONTROLLED_LANES];
-    double frac[SPEED_CONTROLLED_LANES];
+    double frac[SPEED_CONTROLLED_LANES] = {0};
     int due[SPEED_CONTROLLED_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -2639,7 +2639,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[SPEED_CONTROLLED_LANES];
     double told[SPEED_CONTROLLED_LANES];
     double hs[SPEED_CONTROLLED_LANES];
-    double frac[SPEED_CONTROLLED_LANES];
+    double frac[SPEED_CONTROLLED_LANES] = {0};
     int due[SPEED_CONTROLLED_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3489,7 +3489,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[SPEED_CONTROLLED_LANES];
     int lock[SPEED_CONTROLLED_LANES];
     int rej[SPEED_CONTROLLED_LANES];
-    double frac[SPEED_CONTROLLED_LANES];
+    double frac[SPEED_CONTROLLED_LANES] = {0};
     int due[SPEED_CONTROLLED_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -4451,7 +4451,7 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double rho[SPEED_CONTROLLED_LANES];
     double h2[SPEED_CONTROLLED_LANES];
     double told[SPEED_CONTROLLED_LANES];
-    double frac[SPEED_CONTROLLED_LANES];
+    double frac[SPEED_CONTROLLED_LANES] = {0};
     int due[SPEED_CONTROLLED_LANES];
     int i, l, q;
     int need;

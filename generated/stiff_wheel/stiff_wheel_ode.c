@@ -1935,7 +1935,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[STIFF_WHEEL_LANES];
     double told[STIFF_WHEEL_LANES];
     double hs[STIFF_WHEEL_LANES];
-    double frac[STIFF_WHEEL_LANES];
+    double frac[STIFF_WHEEL_LANES] = {0};
     int due[STIFF_WHEEL_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -2541,7 +2541,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[STIFF_WHEEL_LANES];
     double told[STIFF_WHEEL_LANES];
     double hs[STIFF_WHEEL_LANES];
-    double frac[STIFF_WHEEL_LANES];
+    double frac[STIFF_WHEEL_LANES] = {0};
     int due[STIFF_WHEEL_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3385,7 +3385,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[STIFF_WHEEL_LANES];
     int lock[STIFF_WHEEL_LANES];
     int rej[STIFF_WHEEL_LANES];
-    double frac[STIFF_WHEEL_LANES];
+    double frac[STIFF_WHEEL_LANES] = {0};
     int due[STIFF_WHEEL_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;

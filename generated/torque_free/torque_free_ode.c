@@ -1893,7 +1893,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[TORQUE_FREE_LANES];
     double told[TORQUE_FREE_LANES];
     double hs[TORQUE_FREE_LANES];
-    double frac[TORQUE_FREE_LANES];
+    double frac[TORQUE_FREE_LANES] = {0};
     int due[TORQUE_FREE_LANES];
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -2499,7 +2499,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[TORQUE_FREE_LANES];
     double told[TORQUE_FREE_LANES];
     double hs[TORQUE_FREE_LANES];
-    double frac[TORQUE_FREE_LANES];
+    double frac[TORQUE_FREE_LANES] = {0};
     int due[TORQUE_FREE_LANES];
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3343,7 +3343,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[TORQUE_FREE_LANES];
     int lock[TORQUE_FREE_LANES];
     int rej[TORQUE_FREE_LANES];
-    double frac[TORQUE_FREE_LANES];
+    double frac[TORQUE_FREE_LANES] = {0};
     int due[TORQUE_FREE_LANES];
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -4168,7 +4168,7 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double rho[TORQUE_FREE_LANES];
     double h2[TORQUE_FREE_LANES];
     double told[TORQUE_FREE_LANES];
-    double frac[TORQUE_FREE_LANES];
+    double frac[TORQUE_FREE_LANES] = {0};
     int due[TORQUE_FREE_LANES];
     int i, l, q;
     int need;

@@ -4839,7 +4839,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[VSCMG3_LANES];
     double told[VSCMG3_LANES];
     double hs[VSCMG3_LANES];
-    double frac[VSCMG3_LANES];
+    double frac[VSCMG3_LANES] = {0};
     int due[VSCMG3_LANES];
     static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0};
@@ -5447,7 +5447,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[VSCMG3_LANES];
     double told[VSCMG3_LANES];
     double hs[VSCMG3_LANES];
-    double frac[VSCMG3_LANES];
+    double frac[VSCMG3_LANES] = {0};
     int due[VSCMG3_LANES];
     static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0};
@@ -6291,7 +6291,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[VSCMG3_LANES];
     int lock[VSCMG3_LANES];
     int rej[VSCMG3_LANES];
-    double frac[VSCMG3_LANES];
+    double frac[VSCMG3_LANES] = {0};
     int due[VSCMG3_LANES];
     static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0};
@@ -7996,7 +7996,7 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double rho[VSCMG3_LANES];
     double h2[VSCMG3_LANES];
     double told[VSCMG3_LANES];
-    double frac[VSCMG3_LANES];
+    double frac[VSCMG3_LANES] = {0};
     int due[VSCMG3_LANES];
     int i, l, q;
     int need;

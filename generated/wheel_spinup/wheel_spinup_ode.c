@@ -1973,7 +1973,7 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double total[WHEEL_SPINUP_LANES];
     double told[WHEEL_SPINUP_LANES];
     double hs[WHEEL_SPINUP_LANES];
-    double frac[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
     int due[WHEEL_SPINUP_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -2581,7 +2581,7 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double deno[WHEEL_SPINUP_LANES];
     double told[WHEEL_SPINUP_LANES];
     double hs[WHEEL_SPINUP_LANES];
-    double frac[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
     int due[WHEEL_SPINUP_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -3427,7 +3427,7 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     int take[WHEEL_SPINUP_LANES];
     int lock[WHEEL_SPINUP_LANES];
     int rej[WHEEL_SPINUP_LANES];
-    double frac[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
     int due[WHEEL_SPINUP_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int i, l;
@@ -4341,7 +4341,7 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double rho[WHEEL_SPINUP_LANES];
     double h2[WHEEL_SPINUP_LANES];
     double told[WHEEL_SPINUP_LANES];
-    double frac[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
     int due[WHEEL_SPINUP_LANES];
     int i, l, q;
     int need;

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from gyrogen import abi
 from gyrogen import methods as registry
@@ -173,8 +173,13 @@ def grid_locals(body: object, grid: bool | Grid = True) -> tuple[Decl, ...]:
 
 def lane_grid_locals(body: object) -> tuple[Decl, ...]:
     """grid_locals of a step over lanes: g and the grid's ends are the
-    struct's and the step's arguments."""
-    return tuple(d for d in grid_locals(body) if d.name not in ("g", "t0", "t1"))
+    struct's and the step's arguments. frac starts at 0 on every lane: a
+    lane not due keeps its frac by selection, which reads it."""
+    return tuple(
+        replace(d, init=Num(0.0)) if d.name == "frac" else d
+        for d in grid_locals(body)
+        if d.name not in ("g", "t0", "t1")
+    )
 
 
 def rows(name: str, count: int) -> Decl:

@@ -27,6 +27,7 @@ from gyrogen.codegen.ir.nodes import (
     If,
     Int,
     Loop,
+    Num,
     Row,
     S,
     Sel,
@@ -302,7 +303,7 @@ class LanesPrinter(CPrinter):
             if d.values
             else f"{CTYPE[d.type]} {d.name}{''.join(f'[{self.extent(n)}]' for n in d.shape)};"
             if d.intent == "in"
-            else f"{CTYPE[d.type]} {d.name}[{self.width}];"
+            else f"{CTYPE[d.type]} {d.name}[{self.width}]{lane_init(d)};"
             for d in func.locals
             if d.intent != "tmp"
         ]
@@ -318,6 +319,15 @@ class LanesPrinter(CPrinter):
         decls = [y for x in locals_ for y in p.wrap(self.indent + x, self.indent * 3, "")]
         lines = [*doc, *head, "{", *decls, *body, "}"]
         return "\n".join(lines) + "\n"
+
+
+def lane_init(d: Decl) -> str:
+    """A per-lane local's start on every lane: only 0 (an initializer that
+    fills the lanes whatever their number)."""
+    if d.init is None:
+        return ""
+    assert isinstance(d.init, Num) and d.init.value == 0, f"a lane's start is 0: {d}"
+    return " = {0}"
 
 
 def vector(body: tuple[S, ...] | list[S]) -> bool:
