@@ -689,3 +689,28 @@ def test_a_crossing_before_g_turns_nan_in_the_step_is_located(
             assert abs(logs[0].times[0] - 1.75) <= 4 * np.spacing(1.75), method
         else:
             assert abs(logs[0].states[0, 2] - 5.0075) < 1e-12, method
+
+
+@pytest.mark.parametrize(
+    ("expr", "crossing"),
+    [("sqrt(t - 1.5) - 0.5", "t == 1.75"), ("sqrt(q3 - 5) - 0.05", "q3 == 5.0025")],
+)
+def test_a_crossing_after_g_turns_finite_in_the_step_is_located(
+    tmp_path: Path, expr: str, crossing: str
+) -> None:
+    """The mirror: g is NaN at a step's (or piece's) start, turns finite and
+    crosses 0 within it. The crossing is located, in C and Fortran alike (it
+    was missed by every method but one that happened to end a step between
+    the two)."""
+    scene = _scene("dual_spin", f'[[events]]\nname = "born"\nexpr = "{expr}"\n')
+    generate(scene, tmp_path)
+    builds = [build.build(tmp_path, lang) for lang in ("c", "fortran")]
+    x0, c = np.array(scene.initial_state()), builds[0].setup([])
+    for method in ADAPTIVE:
+        logs = [b.integrate_events(method, x0, c, [0.0, 200.0])[1] for b in builds]
+        assert logs[0].names == ["born"], (method, logs[0].times)
+        assert np.array_equal(logs[0].times, logs[1].times)
+        if crossing.startswith("t"):
+            assert abs(logs[0].times[0] - 1.75) <= 4 * np.spacing(1.75), method
+        else:
+            assert abs(logs[0].states[0, 2] - 5.0025) < 1e-12, method

@@ -5484,7 +5484,8 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
                         (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
+                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
                     ev_need = 1;
                 }
             }
@@ -5648,6 +5649,84 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                     }
                                 }
                                 ev_t[ev_k] = ev_b;
+                            }
+                        } else {
+                            if (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_a = ev_ta;
+                                ev_f = ev_tb;
+                                ev_gf = ev_new[ev_k];
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                    if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
+                                                - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
+                                                told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
+                                                / hs) * dense[3][i])));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_a = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >= 0.0) ||
+                                        (ev_dir[ev_k] != 1 && ev_gf > 0.0 && ev_new[ev_k] <= 0.0)) {
+                                    ev_a = ev_f;
+                                    ev_b = ev_tb;
+                                    ev_ga = ev_gf;
+                                    ev_gb = ev_new[ev_k];
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] +
+                                                    (1.0 - (ev_m - told) / hs) * (dense[1][i] +
+                                                    (ev_m - told) / hs * (dense[2][i] + (1.0 -
+                                                    (ev_m - told) / hs) * dense[3][i])));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
                             }
                         }
                     }
@@ -6695,7 +6774,8 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
                         (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
+                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
                     ev_need = 1;
                 }
             }
@@ -6913,6 +6993,90 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                     }
                                 }
                                 ev_t[ev_k] = ev_b;
+                            }
+                        } else {
+                            if (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_a = ev_ta;
+                                ev_f = ev_tb;
+                                ev_gf = ev_new[ev_k];
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                    if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
+                                                - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
+                                                told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
+                                                / hs) * (dense[3][i] + (ev_m - told) / hs *
+                                                (dense[4][i] + (1.0 - (ev_m - told) / hs) *
+                                                (dense[5][i] + (ev_m - told) / hs *
+                                                dense[6][i]))))));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_a = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >= 0.0) ||
+                                        (ev_dir[ev_k] != 1 && ev_gf > 0.0 && ev_new[ev_k] <= 0.0)) {
+                                    ev_a = ev_f;
+                                    ev_b = ev_tb;
+                                    ev_ga = ev_gf;
+                                    ev_gb = ev_new[ev_k];
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] +
+                                                    (1.0 - (ev_m - told) / hs) * (dense[1][i] +
+                                                    (ev_m - told) / hs * (dense[2][i] + (1.0 -
+                                                    (ev_m - told) / hs) * (dense[3][i] + (ev_m -
+                                                    told) / hs * (dense[4][i] + (1.0 - (ev_m -
+                                                    told) / hs) * (dense[5][i] + (ev_m - told) /
+                                                    hs * dense[6][i]))))));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
                             }
                         }
                     }
@@ -7780,7 +7944,8 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
                         (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
+                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
                     ev_need = 1;
                 }
             }
@@ -7932,6 +8097,82 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                     }
                                 }
                                 ev_t[ev_k] = ev_b;
+                            }
+                        } else {
+                            if (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_a = ev_ta;
+                                ev_f = ev_tb;
+                                ev_gf = ev_new[ev_k];
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                    if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h
+                                                * (xnew[i] + (1.0 - (ev_m - t) / h) *
+                                                (dense[0][i] + (ev_m - t) / h * dense[1][i]));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_a = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >= 0.0) ||
+                                        (ev_dir[ev_k] != 1 && ev_gf > 0.0 && ev_new[ev_k] <= 0.0)) {
+                                    ev_a = ev_f;
+                                    ev_b = ev_tb;
+                                    ev_ga = ev_gf;
+                                    ev_gb = ev_new[ev_k];
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t)
+                                                    / h * (xnew[i] + (1.0 - (ev_m - t) / h) *
+                                                    (dense[0][i] + (ev_m - t) / h * dense[1][i]));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
                             }
                         }
                     }
@@ -9336,7 +9577,8 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
                         (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
+                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
                     ev_need = 1;
                 }
             }
@@ -9491,6 +9733,85 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                     }
                                 }
                                 ev_t[ev_k] = ev_b;
+                            }
+                        } else {
+                            if (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_a = ev_ta;
+                                ev_f = ev_tb;
+                                ev_gf = ev_new[ev_k];
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                    if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
+                                                (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
+                                                0.35505102572168223) * (ak2[i] + ((ev_m - (last ?
+                                                t1 : t + h)) / h + 0.8449489742783178) * ak3[i]));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_a = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >= 0.0) ||
+                                        (ev_dir[ev_k] != 1 && ev_gf > 0.0 && ev_new[ev_k] <= 0.0)) {
+                                    ev_a = ev_f;
+                                    ev_b = ev_tb;
+                                    ev_ga = ev_gf;
+                                    ev_gb = ev_new[ev_k];
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h
+                                                    * (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h
+                                                    + 0.35505102572168223) * (ak2[i] + ((ev_m -
+                                                    (last ? t1 : t + h)) / h +
+                                                    0.8449489742783178) * ak3[i]));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
                             }
                         }
                     }
@@ -11192,7 +11513,8 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
                         (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
+                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
                     ev_need = 1;
                 }
             }
@@ -11372,6 +11694,97 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                     }
                                 }
                                 ev_t[ev_k] = ev_b;
+                            }
+                        } else {
+                            if (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_a = ev_ta;
+                                ev_f = ev_tb;
+                                ev_gf = ev_new[ev_k];
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                    if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < 7; ++i) {
+                                        acc[i] = tay[order][i];
+                                    }
+                                    for (q = 0; q < order - 1; ++q) {
+                                        for (i = 0; i < 7; ++i) {
+                                            acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
+                                        }
+                                    }
+                                    for (i = 0; i < 7; ++i) {
+                                        ev_y[i] = x[i] + (ev_m - told) * acc[i];
+                                    }
+                                    ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_a = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >= 0.0) ||
+                                        (ev_dir[ev_k] != 1 && ev_gf > 0.0 && ev_new[ev_k] <= 0.0)) {
+                                    ev_a = ev_f;
+                                    ev_b = ev_tb;
+                                    ev_ga = ev_gf;
+                                    ev_gb = ev_new[ev_k];
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < 7; ++i) {
+                                            acc[i] = tay[order][i];
+                                        }
+                                        for (q = 0; q < order - 1; ++q) {
+                                            for (i = 0; i < 7; ++i) {
+                                                acc[i] = tay[order - 1 - q][i] + (ev_m - told) *
+                                                        acc[i];
+                                            }
+                                        }
+                                        for (i = 0; i < 7; ++i) {
+                                            ev_y[i] = x[i] + (ev_m - told) * acc[i];
+                                        }
+                                        ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
                             }
                         }
                     }

@@ -2106,6 +2106,7 @@ contains
           if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
               0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
               ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
               ieee_is_finite(ev_end(ev_k)))) then
             ev_need = 1
           end if
@@ -2275,6 +2276,84 @@ contains
                     end if
                   end do
                   ev_t(ev_k) = ev_b
+                end if
+              else
+                if (.not. ieee_is_finite(ev_old(ev_k)) .and. ieee_is_finite(ev_new(ev_k))) then
+                  ev_a = ev_ta
+                  ev_f = ev_tb
+                  ev_gf = ev_new(ev_k)
+                  ev_it = 0
+                  do
+                    if (ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_a + 0.5_c_double * (ev_f - ev_a)
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                          0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          1) + ((ev_m - told) / hs) * (dense(i, &
+                          2) + (1.0_c_double - (ev_m - told) / hs) * dense(i, 3))))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    if (ieee_is_finite(ev_g(ev_k))) then
+                      ev_f = ev_m
+                      ev_gf = ev_g(ev_k)
+                    else
+                      ev_a = ev_m
+                    end if
+                  end do
+                  if ((ev_dir(ev_k) /= -1 .and. ev_gf < 0.0_c_double .and. ev_new(ev_k) >= &
+                      0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_gf > 0.0_c_double .and. &
+                      ev_new(ev_k) <= 0.0_c_double)) then
+                    ev_a = ev_f
+                    ev_b = ev_tb
+                    ev_ga = ev_gf
+                    ev_gb = ev_new(ev_k)
+                    ev_side = 0
+                    ev_it = 0
+                    do
+                      if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                        exit
+                      end if
+                      ev_it = ev_it + 1
+                      ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        exit
+                      end if
+                      do i = 0, nx - 1
+                        ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                            0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                            1) + ((ev_m - told) / hs) * (dense(i, &
+                            2) + (1.0_c_double - (ev_m - told) / hs) * dense(i, 3))))
+                      end do
+                      call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                      ev_gm = ev_g(ev_k)
+                      if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                          0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                        ev_a = ev_m
+                        ev_ga = ev_gm
+                        if (ev_side == -1) then
+                          ev_gb = 0.5_c_double * ev_gb
+                        end if
+                        ev_side = -1
+                      else
+                        ev_b = ev_m
+                        ev_gb = ev_gm
+                        if (ev_side == 1) then
+                          ev_ga = 0.5_c_double * ev_ga
+                        end if
+                        ev_side = 1
+                      end if
+                    end do
+                    ev_t(ev_k) = ev_b
+                  end if
                 end if
               end if
             end if
@@ -3462,6 +3541,7 @@ contains
           if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
               0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
               ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
               ieee_is_finite(ev_end(ev_k)))) then
             ev_need = 1
           end if
@@ -3701,6 +3781,90 @@ contains
                     end if
                   end do
                   ev_t(ev_k) = ev_b
+                end if
+              else
+                if (.not. ieee_is_finite(ev_old(ev_k)) .and. ieee_is_finite(ev_new(ev_k))) then
+                  ev_a = ev_ta
+                  ev_f = ev_tb
+                  ev_gf = ev_new(ev_k)
+                  ev_it = 0
+                  do
+                    if (ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_a + 0.5_c_double * (ev_f - ev_a)
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                          0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          1) + ((ev_m - told) / hs) * (dense(i, &
+                          2) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          3) + ((ev_m - told) / hs) * (dense(i, &
+                          4) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                          5) + ((ev_m - told) / hs) * dense(i, 6)))))))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    if (ieee_is_finite(ev_g(ev_k))) then
+                      ev_f = ev_m
+                      ev_gf = ev_g(ev_k)
+                    else
+                      ev_a = ev_m
+                    end if
+                  end do
+                  if ((ev_dir(ev_k) /= -1 .and. ev_gf < 0.0_c_double .and. ev_new(ev_k) >= &
+                      0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_gf > 0.0_c_double .and. &
+                      ev_new(ev_k) <= 0.0_c_double)) then
+                    ev_a = ev_f
+                    ev_b = ev_tb
+                    ev_ga = ev_gf
+                    ev_gb = ev_new(ev_k)
+                    ev_side = 0
+                    ev_it = 0
+                    do
+                      if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                        exit
+                      end if
+                      ev_it = ev_it + 1
+                      ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        exit
+                      end if
+                      do i = 0, nx - 1
+                        ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
+                            0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                            1) + ((ev_m - told) / hs) * (dense(i, &
+                            2) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                            3) + ((ev_m - told) / hs) * (dense(i, &
+                            4) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
+                            5) + ((ev_m - told) / hs) * dense(i, 6)))))))
+                      end do
+                      call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                      ev_gm = ev_g(ev_k)
+                      if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                          0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                        ev_a = ev_m
+                        ev_ga = ev_gm
+                        if (ev_side == -1) then
+                          ev_gb = 0.5_c_double * ev_gb
+                        end if
+                        ev_side = -1
+                      else
+                        ev_b = ev_m
+                        ev_gb = ev_gm
+                        if (ev_side == 1) then
+                          ev_ga = 0.5_c_double * ev_ga
+                        end if
+                        ev_side = 1
+                      end if
+                    end do
+                    ev_t(ev_k) = ev_b
+                  end if
                 end if
               end if
             end if
@@ -4711,6 +4875,7 @@ contains
           if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
               0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
               ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
               ieee_is_finite(ev_end(ev_k)))) then
             ev_need = 1
           end if
@@ -4865,6 +5030,82 @@ contains
                     end if
                   end do
                   ev_t(ev_k) = ev_b
+                end if
+              else
+                if (.not. ieee_is_finite(ev_old(ev_k)) .and. ieee_is_finite(ev_new(ev_k))) then
+                  ev_a = ev_ta
+                  ev_f = ev_tb
+                  ev_gf = ev_new(ev_k)
+                  ev_it = 0
+                  do
+                    if (ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_a + 0.5_c_double * (ev_f - ev_a)
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
+                          (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
+                          0) + ((ev_m - t) / h) * dense(i, 1)))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    if (ieee_is_finite(ev_g(ev_k))) then
+                      ev_f = ev_m
+                      ev_gf = ev_g(ev_k)
+                    else
+                      ev_a = ev_m
+                    end if
+                  end do
+                  if ((ev_dir(ev_k) /= -1 .and. ev_gf < 0.0_c_double .and. ev_new(ev_k) >= &
+                      0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_gf > 0.0_c_double .and. &
+                      ev_new(ev_k) <= 0.0_c_double)) then
+                    ev_a = ev_f
+                    ev_b = ev_tb
+                    ev_ga = ev_gf
+                    ev_gb = ev_new(ev_k)
+                    ev_side = 0
+                    ev_it = 0
+                    do
+                      if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                        exit
+                      end if
+                      ev_it = ev_it + 1
+                      ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        exit
+                      end if
+                      do i = 0, nx - 1
+                        ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
+                            (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
+                            0) + ((ev_m - t) / h) * dense(i, 1)))
+                      end do
+                      call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                      ev_gm = ev_g(ev_k)
+                      if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                          0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                        ev_a = ev_m
+                        ev_ga = ev_gm
+                        if (ev_side == -1) then
+                          ev_gb = 0.5_c_double * ev_gb
+                        end if
+                        ev_side = -1
+                      else
+                        ev_b = ev_m
+                        ev_gb = ev_gm
+                        if (ev_side == 1) then
+                          ev_ga = 0.5_c_double * ev_ga
+                        end if
+                        ev_side = 1
+                      end if
+                    end do
+                    ev_t(ev_k) = ev_b
+                  end if
                 end if
               end if
             end if
@@ -6437,6 +6678,7 @@ contains
           if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
               0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
               ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
               ieee_is_finite(ev_end(ev_k)))) then
             ev_need = 1
           end if
@@ -6595,6 +6837,84 @@ contains
                     end if
                   end do
                   ev_t(ev_k) = ev_b
+                end if
+              else
+                if (.not. ieee_is_finite(ev_old(ev_k)) .and. ieee_is_finite(ev_new(ev_k))) then
+                  ev_a = ev_ta
+                  ev_f = ev_tb
+                  ev_gf = ev_new(ev_k)
+                  ev_it = 0
+                  do
+                    if (ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_a + 0.5_c_double * (ev_f - ev_a)
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
+                      exit
+                    end if
+                    do i = 0, nx - 1
+                      ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
+                          last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
+                          last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
+                          (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+                    end do
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    if (ieee_is_finite(ev_g(ev_k))) then
+                      ev_f = ev_m
+                      ev_gf = ev_g(ev_k)
+                    else
+                      ev_a = ev_m
+                    end if
+                  end do
+                  if ((ev_dir(ev_k) /= -1 .and. ev_gf < 0.0_c_double .and. ev_new(ev_k) >= &
+                      0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_gf > 0.0_c_double .and. &
+                      ev_new(ev_k) <= 0.0_c_double)) then
+                    ev_a = ev_f
+                    ev_b = ev_tb
+                    ev_ga = ev_gf
+                    ev_gb = ev_new(ev_k)
+                    ev_side = 0
+                    ev_it = 0
+                    do
+                      if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                        exit
+                      end if
+                      ev_it = ev_it + 1
+                      ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        exit
+                      end if
+                      do i = 0, nx - 1
+                        ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
+                            last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
+                            last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
+                            (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+                      end do
+                      call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                      ev_gm = ev_g(ev_k)
+                      if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                          0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                        ev_a = ev_m
+                        ev_ga = ev_gm
+                        if (ev_side == -1) then
+                          ev_gb = 0.5_c_double * ev_gb
+                        end if
+                        ev_side = -1
+                      else
+                        ev_b = ev_m
+                        ev_gb = ev_gm
+                        if (ev_side == 1) then
+                          ev_ga = 0.5_c_double * ev_ga
+                        end if
+                        ev_side = 1
+                      end if
+                    end do
+                    ev_t(ev_k) = ev_b
+                  end if
                 end if
               end if
             end if
@@ -8420,6 +8740,7 @@ contains
           if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
               0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
               ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
               ieee_is_finite(ev_end(ev_k)))) then
             ev_need = 1
           end if
@@ -8602,6 +8923,96 @@ contains
                     end if
                   end do
                   ev_t(ev_k) = ev_b
+                end if
+              else
+                if (.not. ieee_is_finite(ev_old(ev_k)) .and. ieee_is_finite(ev_new(ev_k))) then
+                  ev_a = ev_ta
+                  ev_f = ev_tb
+                  ev_gf = ev_new(ev_k)
+                  ev_it = 0
+                  do
+                    if (ev_it >= 200) then
+                      exit
+                    end if
+                    ev_it = ev_it + 1
+                    ev_m = ev_a + 0.5_c_double * (ev_f - ev_a)
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
+                      exit
+                    end if
+                    do i = 0, 7 - 1
+                      acc(i) = tay(i, order)
+                    end do
+                    do q = 0, order - 1 - 1
+                      do i = 0, 7 - 1
+                        acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
+                      end do
+                    end do
+                    do i = 0, 7 - 1
+                      ev_y(i) = x(i) + (ev_m - told) * acc(i)
+                    end do
+                    ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
+                    call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                    if (ieee_is_finite(ev_g(ev_k))) then
+                      ev_f = ev_m
+                      ev_gf = ev_g(ev_k)
+                    else
+                      ev_a = ev_m
+                    end if
+                  end do
+                  if ((ev_dir(ev_k) /= -1 .and. ev_gf < 0.0_c_double .and. ev_new(ev_k) >= &
+                      0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_gf > 0.0_c_double .and. &
+                      ev_new(ev_k) <= 0.0_c_double)) then
+                    ev_a = ev_f
+                    ev_b = ev_tb
+                    ev_ga = ev_gf
+                    ev_gb = ev_new(ev_k)
+                    ev_side = 0
+                    ev_it = 0
+                    do
+                      if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
+                        exit
+                      end if
+                      ev_it = ev_it + 1
+                      ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        exit
+                      end if
+                      do i = 0, 7 - 1
+                        acc(i) = tay(i, order)
+                      end do
+                      do q = 0, order - 1 - 1
+                        do i = 0, 7 - 1
+                          acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
+                        end do
+                      end do
+                      do i = 0, 7 - 1
+                        ev_y(i) = x(i) + (ev_m - told) * acc(i)
+                      end do
+                      ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
+                      call wheel_spinup_events(ev_m, ev_y, c, ev_g)
+                      ev_gm = ev_g(ev_k)
+                      if ((ev_gm > 0.0_c_double .and. ev_ga > 0.0_c_double) .or. (.not. (ev_gm > &
+                          0.0_c_double) .and. .not. (ev_ga > 0.0_c_double))) then
+                        ev_a = ev_m
+                        ev_ga = ev_gm
+                        if (ev_side == -1) then
+                          ev_gb = 0.5_c_double * ev_gb
+                        end if
+                        ev_side = -1
+                      else
+                        ev_b = ev_m
+                        ev_gb = ev_gm
+                        if (ev_side == 1) then
+                          ev_ga = 0.5_c_double * ev_ga
+                        end if
+                        ev_side = 1
+                      end if
+                    end do
+                    ev_t(ev_k) = ev_b
+                  end if
                 end if
               end if
             end if

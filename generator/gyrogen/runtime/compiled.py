@@ -990,7 +990,8 @@ class Compiled:
         step (tighter tolerances) where g oscillates faster than the
         motion; a NaN g never crosses (a crossing before g turns NaN
         within a step is located: the step is searched up to g's last
-        finite point).
+        finite point, and one after g turns finite from its first finite
+        point).
 
         Parameters
         ----------

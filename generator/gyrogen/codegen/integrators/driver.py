@@ -414,18 +414,19 @@ def _g_at(dense: Interpolant, at: Callable[[E], E], time: E) -> list[S]:
 
 
 def _search(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E,
-            g_end: E) -> list[S]:  # fmt: skip
+            g_end: E, g_start: E | None = None) -> list[S]:  # fmt: skip
     """ev_t[k] := where event k's g crosses 0 within [start, end] (g_end its
-    g at end): the Illinois method (regula falsi that halves the side it
-    keeps), a bisection where its point leaves the bracket, until the
-    bracket holds no double between its ends or ev_iterations evaluations;
-    the crossing is the bracket's right end, the first time g is on its new
-    side (or 0)."""
+    g at end, g_start at start: ev_old[k] unless given): the Illinois method
+    (regula falsi that halves the side it keeps), a bisection where its
+    point leaves the bracket, until the bracket holds no double between its
+    ends or ev_iterations evaluations; the crossing is the bracket's right
+    end, the first time g is on its new side (or 0)."""
     inner = and_(cmp(EV_M, ">", EV_A), cmp(EV_M, "<", EV_B))
     pos_m, pos_a = cmp(EV_GM, ">", 0.0), cmp(EV_GA, ">", 0.0)
     same = or_(and_(pos_m, pos_a), and_(not_(pos_m), not_(pos_a)))
     return [
-        assign(EV_A, start), assign(EV_B, end), assign(EV_GA, EV_OLD[k]),
+        assign(EV_A, start), assign(EV_B, end),
+        assign(EV_GA, EV_OLD[k] if g_start is None else g_start),
         assign(EV_GB, g_end), assign(EV_SIDE, 0), assign(EV_IT, 0),
         Loop((
             If(or_(cmp(fn("abs", EV_GB), "<=", 0.0), cmp(EV_IT, ">=", EV_ITERATIONS)), (Break(),)),
@@ -483,6 +484,38 @@ def _last_finite(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: 
     ]  # fmt: skip
 
 
+def _first_finite(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) -> list[S]:
+    """_last_finite's mirror: ev_f, ev_gf := the first time within [start,
+    end] found where event k's g is finite (and g there), by bisection
+    between start (g not finite) and end (finite: ev_new[k]): where g turns
+    finite within a piece, a crossing after that is searched in [ev_f, end]."""
+    return [
+        assign(EV_A, start), assign(EV_F, end), assign(EV_GF, EV_NEW[k]), assign(EV_IT, 0),
+        Loop((
+            If(cmp(EV_IT, ">=", EV_ITERATIONS), (Break(),)),
+            inc(EV_IT, 1),
+            assign(EV_M, EV_A + 0.5 * (EV_F - EV_A)),
+            If(not_(and_(cmp(EV_M, ">", EV_A), cmp(EV_M, "<", EV_F))), (Break(),)),
+            *_g_at(dense, at, EV_M),
+            If(fn("finite", EV_G[k]), (assign(EV_F, EV_M), assign(EV_GF, EV_G[k])), (
+                assign(EV_A, EV_M),)),
+        )),
+    ]  # fmt: skip
+
+
+def _turned_finite(k: E, new: E) -> E:
+    """Event k's g was not finite at a piece's start (ev_old[k]) and is at
+    its end (new)."""
+    return and_(not_(fn("finite", EV_OLD[k])), fn("finite", new))
+
+
+def _crossed_from(k: E, old: E, new: E) -> E:
+    """_crossed with g at the start given (old), not ev_old[k]."""
+    up = and_(cmp(Var("ev_dir")[k], "!=", -1), cmp(old, "<", 0.0), cmp(new, ">=", 0.0))
+    down = and_(cmp(Var("ev_dir")[k], "!=", 1), cmp(old, ">", 0.0), cmp(new, "<=", 0.0))
+    return or_(up, down)
+
+
 def _turned_nan(k: E, new: E) -> E:
     """Event k's g was finite at a piece's start (ev_old[k]) and is not at
     its end (new)."""
@@ -493,9 +526,7 @@ def _crossed(k: E, new: E) -> E:
     """Event k's g went from ev_old[k] to new across 0 as its direction asks
     (from a g other than 0: a g of 0 at a piece's end is that piece's
     crossing, never the next one's too)."""
-    up = and_(cmp(Var("ev_dir")[k], "!=", -1), cmp(EV_OLD[k], "<", 0.0), cmp(new, ">=", 0.0))
-    down = and_(cmp(Var("ev_dir")[k], "!=", 1), cmp(EV_OLD[k], ">", 0.0), cmp(new, "<=", 0.0))
-    return or_(up, down)
+    return _crossed_from(k, EV_OLD[k], new)
 
 
 def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]:
@@ -505,13 +536,14 @@ def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]
     ne, k, need, g_end = Int(len(grid.events)), Var("ev_k"), Var("ev_need"), Var("ev_end")
     if grid.pieces > 1:
         return [Call("events", (end, xnew, c, g_end)), *coefficients]
+    changed = or_(_crossed(k, g_end[k]), _turned_nan(k, g_end[k]), _turned_finite(k, g_end[k]))
     return [
         Call("events", (end, xnew, c, g_end)),
         assign(need, sel(due(end), Int(1), Int(0))),
         For(
             "ev_k",
             ne,
-            (If(or_(_crossed(k, g_end[k]), _turned_nan(k, g_end[k])), (assign(need, 1),)),),
+            (If(changed, (assign(need, 1),)),),
         ),
         If(cmp(need, "!=", 0), tuple(coefficients)),
     ]
@@ -554,6 +586,12 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
                     If(_turned_nan(k, EV_NEW[k]), (
                         *_last_finite(dense, at, k, ta, tb),
                         If(_crossed(k, EV_GF), tuple(_search(dense, at, k, ta, EV_F, EV_GF))),
+                    ), (
+                        If(_turned_finite(k, EV_NEW[k]), (
+                            *_first_finite(dense, at, k, ta, tb),
+                            If(_crossed_from(k, EV_GF, EV_NEW[k]), tuple(
+                                _search(dense, at, k, EV_F, tb, EV_NEW[k], EV_GF))),
+                        )),
                     )),
                 )),
             )),
