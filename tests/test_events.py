@@ -48,10 +48,17 @@ def _scene(name: str, extra: str = EVENTS) -> Scene:
 
 
 @pytest.fixture(scope="module")
-def compiled(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Compiled], Scene]:
+def generated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Scene]:
+    """gyrostat with EVENTS, generated once for the module's tests."""
     scene = _scene("gyrostat")
     out = tmp_path_factory.mktemp("events")
     generate(scene, out)
+    return out, scene
+
+
+@pytest.fixture(scope="module")
+def compiled(generated: tuple[Path, Scene]) -> tuple[list[Compiled], Scene]:
+    out, scene = generated
     return [build.build(out, lang) for lang in ("c", "fortran")], scene
 
 
@@ -74,21 +81,21 @@ def test_the_compiled_events_are_the_reference(compiled: tuple[list[Compiled], S
 
 
 def test_the_manifest_and_header_name_the_events(
-    compiled: tuple[list[Compiled], Scene], tmp_path: Path
+    compiled: tuple[list[Compiled], Scene], generated: tuple[Path, Scene]
 ) -> None:
-    (c_build, _), scene = compiled
+    (c_build, _), _ = compiled
+    out, scene = generated
     listed = c_build.manifest["events"]
     assert [e["name"] for e in listed] == ["wheel_fast", "tilted", "energy_and_time"]
     assert listed[0] == {
         "name": "wheel_fast", "expr": "u4 - u2 - 300", "direction": "up", "terminal": True,
     }  # fmt: skip
-    generate(scene, tmp_path)
-    header = (tmp_path / f"{scene.name}.h").read_text()
+    header = (out / f"{scene.name}.h").read_text()
     assert "void gyrostat_events(double t, const double *x, const double *c, double *out);" in (
         header
     )
     assert "out[1]  tilted: cos(q2)*cos(q1) - 0.9 (down)" in header
-    ode_h = " ".join((tmp_path / f"{scene.name}_ode.h").read_text().replace("*", " ").split())
+    ode_h = " ".join((out / f"{scene.name}_ode.h").read_text().replace("*", " ").split())
     assert "each accepted step is searched in 8 equal pieces" in ode_h  # energy_and_time reads t
 
 
@@ -181,14 +188,23 @@ def test_a_multi_line_expression_is_one_line_wherever_it_is_shown() -> None:
                                                 ("num", 1.0))  # fmt: skip
 
 
+@pytest.fixture(scope="module")
+def spin_up(tmp_path_factory: pytest.TempPathFactory) -> tuple[Compiled, Scene]:
+    """The built-in wheel_spinup, generated and compiled once for its methods."""
+    scene = parse(builtin_text("wheel_spinup"), "wheel_spinup.toml")
+    out = tmp_path_factory.mktemp("wheel_spinup")
+    generate(scene, out)
+    return build.build(out, "c"), scene
+
+
 @pytest.mark.slow  # a built-in scene generated and compiled
 @pytest.mark.parametrize("method", ["dop853", "taylor"])
-def test_the_builtin_spin_up_logs_its_wheel_at_40_rad_s(tmp_path: Path, method: str) -> None:
+def test_the_builtin_spin_up_logs_its_wheel_at_40_rad_s(
+    spin_up: tuple[Compiled, Scene], method: str
+) -> None:
     """wheel_spinup declares an event: u4 passes 40 rad/s. Its motor's
     torque gives u4' = T/J exactly, so the crossing is at 40 J/T = 30 s."""
-    scene = parse(builtin_text("wheel_spinup"), "wheel_spinup.toml")
-    generate(scene, tmp_path)
-    comp = build.build(tmp_path, "c")
+    comp, scene = spin_up
     x0, c = np.array(scene.initial_state()), comp.setup([0.02])
     _, log, _, code = comp.integrate_events(method, x0, c, [0.0, 60.0], rtol=1e-12, atol=1e-12)
     assert code == 0 and log.names == ["wheel_at_40_rad_s"]
