@@ -282,7 +282,7 @@ def test_both_languages_build_at_once_under_a_relative_cache(
 
 FAKE_COMPILER = """#!/bin/sh
 case "$*" in
-  *{source}*) sleep 60 & echo $! > "{pids}/$(basename "$0")"; wait; exit 1 ;;
+  *{source}*) sleep 600 & echo $! > "{pids}/$(basename "$0")"; wait; exit 1 ;;
 esac
 exec {real} "$@"
 """
