@@ -310,7 +310,7 @@ def test_a_full_log_stops_with_its_code(located: tuple[list[Compiled], Scene]) -
     assert code == 9 and len(none) == 0
 
 
-@pytest.mark.parametrize("method", ["dop853", "taylor", "rodas4"])
+@pytest.mark.parametrize("method", ["dop853", "dopri5", "taylor", "rodas4"])
 def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], method: str) -> None:
     """_events_batch, C and Fortran, on one and two threads: each state's
     rows, log, statistics and code are its _events call's bit for bit, over
@@ -730,3 +730,57 @@ def test_a_crossing_after_g_turns_finite_in_the_step_is_located(
             assert abs(logs[0].times[0] - 1.75) <= 4 * np.spacing(1.75), method
         else:
             assert abs(logs[0].states[0, 2] - 5.0025) < 1e-12, method
+
+
+ON_STATES = """
+[[events]]
+name = "half"
+expr = "q3 - 2"
+
+[[events]]
+name = "spun"
+expr = "q3 - 5"
+direction = "up"
+terminal = true
+"""
+
+
+@pytest.mark.parametrize("lanes", [1, 4, 8])
+def test_a_batch_over_lanes_is_its_single_calls(tmp_path: Path, lanes: int) -> None:
+    """Events on the states alone (searched at the steps' ends: a lane's
+    interpolant only where it needs it) in _events_batch over lanes of
+    width 1, 4 and 8, C: each state's rows, log (times, events, states),
+    statistics and code are its _events call's bit for bit, with a
+    terminal event on some lanes only, lanes that never fire, an event
+    at t0 (q3 = 2 there: no crossing), a NaN start and logs that fill."""
+    scene = _scene("dual_spin", ON_STATES)
+    generate(scene, tmp_path)
+    header = next(tmp_path.glob("*_ode.h"))
+    text = header.read_text()
+    default = next(line for line in text.splitlines() if line.endswith("_LANES 8"))
+    header.write_text(text.replace(default, default.removesuffix("8") + str(lanes)))
+    comp = build.build(tmp_path, "c")
+    rng = np.random.default_rng(5)
+    x0s = np.tile(np.array(scene.initial_state()), (11, 1))
+    x0s[:, 4] = rng.uniform(0.0, 3.0, 11)  # u2: q3 reaches 5 rad before t = 4 above ~1.3 rad/s
+    x0s[2, 2] = 2.0
+    x0s[6, 3] = np.nan
+    times = np.linspace(0.0, 4.0, 9)
+    c = comp.setup([])
+    codes = set()
+    for capacity in (8, 1):
+        states, logs, stats, code = comp.integrate_events_batch(
+            "dop853", x0s, c, times, 1, capacity=capacity, rtol=1e-9, atol=1e-9
+        )
+        for i, x0 in enumerate(x0s):
+            one, log, one_stats, one_code = comp.integrate_events(
+                "dop853", x0, c, times, capacity=capacity, rtol=1e-9, atol=1e-9
+            )
+            assert code[i] == one_code and np.array_equal(states[i], one, equal_nan=True)
+            assert dict(one_stats) == {k: stats[k][i] for k in one_stats}
+            assert logs[i].names == log.names and np.array_equal(logs[i].times, log.times)
+            assert np.array_equal(logs[i].states, log.states)
+        codes |= set(code.tolist())
+        lengths = [len(logs[i]) for i in range(len(x0s))]
+        assert 0 in lengths and max(lengths) > 0
+    assert {0, 3, 8, 9} <= codes, codes

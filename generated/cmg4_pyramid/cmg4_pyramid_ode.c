@@ -8064,8 +8064,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, cmg4_pyramid_
 static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, long ntimes,
-                         const double *times, double (*out)[CMG4_PYRAMID_NX], cmg4_pyramid_stats *stats,
-                         int *codes)
+                         const double *times, double (*out)[CMG4_PYRAMID_NX],
+                         cmg4_pyramid_stats *stats, int *codes)
 {
     struct lanes L;
     size_t next = begin, failed = 0;
@@ -8103,7 +8103,8 @@ static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t beg
 static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, long ntimes, const double *times,
-                         double (*out)[CMG4_PYRAMID_NX], cmg4_pyramid_stats *stats, int *codes)
+                         double (*out)[CMG4_PYRAMID_NX],
+                         cmg4_pyramid_stats *stats, int *codes)
 {
     size_t failed = 0;
 #ifdef _OPENMP

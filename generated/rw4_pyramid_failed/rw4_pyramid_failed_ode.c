@@ -4661,8 +4661,8 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, rw4_pyramid_f
 static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, long ntimes,
-                         const double *times, double (*out)[RW4_PYRAMID_FAILED_NX], rw4_pyramid_failed_stats *stats,
-                         int *codes)
+                         const double *times, double (*out)[RW4_PYRAMID_FAILED_NX],
+                         rw4_pyramid_failed_stats *stats, int *codes)
 {
     struct lanes L;
     size_t next = begin, failed = 0;
@@ -4700,7 +4700,8 @@ static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t beg
 static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, long ntimes, const double *times,
-                         double (*out)[RW4_PYRAMID_FAILED_NX], rw4_pyramid_failed_stats *stats, int *codes)
+                         double (*out)[RW4_PYRAMID_FAILED_NX],
+                         rw4_pyramid_failed_stats *stats, int *codes)
 {
     size_t failed = 0;
 #ifdef _OPENMP

@@ -1389,6 +1389,10 @@ struct WHEEL_SPINUP_ALIGNED lanes {
     double acc[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
     long g[WHEEL_SPINUP_LANES];
     long base[WHEEL_SPINUP_LANES];
+    double ev_old[1][WHEEL_SPINUP_LANES];
+    double ev_end[1][WHEEL_SPINUP_LANES];
+    long nlog[WHEEL_SPINUP_LANES];
+    long lbase[WHEEL_SPINUP_LANES];
     int code[WHEEL_SPINUP_LANES];
     int nonfinite[WHEEL_SPINUP_LANES];
     int rejected_last[WHEEL_SPINUP_LANES];
@@ -1399,6 +1403,11 @@ struct WHEEL_SPINUP_ALIGNED lanes {
     long ntimes;
     const double *times;
     double (*out)[WHEEL_SPINUP_NX];
+    long capacity;
+    double *log_t;
+    double (*log_x)[WHEEL_SPINUP_NX];
+    long *nlogs;
+    int *log_k;
     int busy[WHEEL_SPINUP_LANES];
 };
 
@@ -2235,6 +2244,548 @@ static void dopri5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One step of dopri5_events on every lane. */
+static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                     double t1, long max_steps)
+{
+    int last[WHEEL_SPINUP_LANES];
+    double err[WHEEL_SPINUP_LANES];
+    int run[WHEEL_SPINUP_LANES];
+    int take[WHEEL_SPINUP_LANES];
+    int lock[WHEEL_SPINUP_LANES];
+    int ok[WHEEL_SPINUP_LANES];
+    double fac[WHEEL_SPINUP_LANES];
+    double grow[WHEEL_SPINUP_LANES];
+    double total[WHEEL_SPINUP_LANES];
+    double told[WHEEL_SPINUP_LANES];
+    double hs[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_new[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_j;
+    int ev_need[WHEEL_SPINUP_LANES] = {0};
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int ev_k, i, l;
+    int need;
+
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+        told[l] = L->t[l];
+        hs[l] = L->h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.2 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2 * L->k[0][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3: t + 0.3 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.075 * L->k[0][i][l] + 0.225 * L->k[1][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4: t + 0.8 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.9777777777777777 * L->k[0][i][l] -
+                    3.7333333333333334 * L->k[1][i][l] + 3.5555555555555554 * L->k[2][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5: t + 0.8888888888888888 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.9525986892242035 * L->k[0][i][l] -
+                    11.595793324188385 * L->k[1][i][l] + 9.822892851699436 * L->k[2][i][l] -
+                    0.2908093278463649 * L->k[3][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8888888888888888 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6: t + h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.8462752525252526 * L->k[0][i][l] -
+                    10.757575757575758 * L->k[1][i][l] + 8.906422717743473 * L->k[2][i][l] +
+                    0.2784090909090909 * L->k[3][i][l] - 0.2735313036020583 * L->k[4][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7: t + h, the new solution */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.09114583333333333 * L->k[0][i][l] + 0.44923629829290207 *
+                    L->k[2][i][l] + 0.6510416666666666 * L->k[3][i][l] - 0.322376179245283 *
+                    L->k[4][i][l] + 0.13095238095238096 * L->k[5][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->xnew, c, L->k[6]);
+
+    /* the error norm (see error_norm) */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        total[l] = 0.0;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            double e;
+            e = L->h[l] * (0.0012326388888888888 * L->k[0][i][l] - 0.0042527702905061394 *
+                    L->k[2][i][l] + 0.03697916666666667 * L->k[3][i][l] - 0.05086379716981132 *
+                    L->k[4][i][l] + 0.0419047619047619 * L->k[5][i][l] - 0.025 * L->k[6][i][l]) /
+                    (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        err[l] = sqrt(total[l] / WHEEL_SPINUP_NX);
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 6 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = pow(err[l], 0.17) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.1, dmin(5.0, fac[l] / pow(L->err_old[l], 0.04)));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? WHEEL_SPINUP_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.2 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(5.0, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = L->xnew[i][l];
+                }
+                wheel_spinup_events(L->t[l], ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_end[ev_k][l] = ev_g[ev_k];
+                }
+                ev_need[l] = L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l] ? 1 : 0;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && L->ev_end[ev_k][l] >=
+                            0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                            L->ev_end[ev_k][l] <= 0.0) || ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX)
+                            && !(fabs(L->ev_end[ev_k][l]) <= DBL_MAX))) {
+                        ev_need[l] = 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /* the dense output of order 4 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dense[0][i][l] = L->xnew[i][l] - L->x[i][l];
+            L->dense[1][i][l] = hs[l] * L->k[0][i][l] - L->dense[0][i][l];
+            L->dense[2][i][l] = L->dense[0][i][l] - hs[l] * L->k[6][i][l] - L->dense[1][i][l];
+            L->dense[3][i][l] = hs[l] * (-1.1270175653862835 * L->k[0][i][l] + 2.675424484351598
+                    * L->k[2][i][l] - 5.685526961588504 * L->k[3][i][l] + 3.5219323679207912 *
+                    L->k[4][i][l] - 1.7672812570757455 * L->k[5][i][l] + 2.382468931778144 *
+                    L->k[6][i][l]);
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l] && ev_need[l] != 0;
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l] && ev_need[l] != 0) {
+                ev_stop = L->t[l];
+                ev_halt = -1;
+                ev_ta = told[l];
+                ev_j = 0;
+                for (;;) {
+                    if (ev_j >= 1) {
+                        break;
+                    }
+                    ev_j = ev_j + 1;
+                    if (ev_j < 1) {
+                        ev_tb = told[l] + (L->t[l] - told[l]) * ((double)ev_j / 1.0);
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
+                                    + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
+                                    (ev_tb - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
+                                    (ev_tb - told[l]) / hs[l]) * L->dense[3][i][l])));
+                        }
+                        wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = ev_g[ev_k];
+                        }
+                    } else {
+                        ev_tb = L->t[l];
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = L->ev_end[ev_k][l];
+                        }
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_t[ev_k] = DBL_MAX;
+                        if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] >=
+                                0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                ev_new[ev_k] <= 0.0)) {
+                            ev_a = ev_ta;
+                            ev_b = ev_tb;
+                            ev_ga = L->ev_old[ev_k][l];
+                            ev_gb = ev_new[ev_k];
+                            ev_side = 0;
+                            ev_it = 0;
+                            for (;;) {
+                                if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                            (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
+                                            * (L->dense[1][i][l] + (ev_m - told[l]) / hs[l] *
+                                            (L->dense[2][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
+                                            * L->dense[3][i][l])));
+                                }
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                ev_gm = ev_g[ev_k];
+                                if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                        0.0))) {
+                                    ev_a = ev_m;
+                                    ev_ga = ev_gm;
+                                    if (ev_side == -1) {
+                                        ev_gb = 0.5 * ev_gb;
+                                    }
+                                    ev_side = -1;
+                                } else {
+                                    ev_b = ev_m;
+                                    ev_gb = ev_gm;
+                                    if (ev_side == 1) {
+                                        ev_ga = 0.5 * ev_ga;
+                                    }
+                                    ev_side = 1;
+                                }
+                            }
+                            ev_t[ev_k] = ev_b;
+                        } else {
+                            if ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_f = ev_ta;
+                                ev_gf = L->ev_old[ev_k][l];
+                                ev_b = ev_tb;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                    if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) /
+                                                hs[l]) * (L->dense[1][i][l] + (ev_m - told[l]) /
+                                                hs[l] * (L->dense[2][i][l] + (1.0 - (ev_m -
+                                                told[l]) / hs[l]) * L->dense[3][i][l])));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_b = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_gf >=
+                                        0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                        ev_gf <= 0.0)) {
+                                    ev_a = ev_ta;
+                                    ev_b = ev_f;
+                                    ev_ga = L->ev_old[ev_k][l];
+                                    ev_gb = ev_gf;
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                    (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
+                                                    / hs[l]) * (L->dense[1][i][l] + (ev_m -
+                                                    told[l]) / hs[l] * (L->dense[2][i][l] + (1.0
+                                                    - (ev_m - told[l]) / hs[l]) *
+                                                    L->dense[3][i][l])));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
+                            }
+                        }
+                    }
+                    for (;;) {
+                        ev_best = -1;
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] <
+                                    ev_t[ev_best])) {
+                                ev_best = ev_k;
+                            }
+                        }
+                        if (ev_best < 0) {
+                            break;
+                        }
+                        if (L->nlog[l] >= L->capacity) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                            break;
+                        }
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            ev_y[i] = L->x[i][l] + (ev_t[ev_best] - told[l]) / hs[l] *
+                                    (L->dense[0][i][l] + (1.0 - (ev_t[ev_best] - told[l]) /
+                                    hs[l]) * (L->dense[1][i][l] + (ev_t[ev_best] - told[l]) /
+                                    hs[l] * (L->dense[2][i][l] + (1.0 - (ev_t[ev_best] - told[l])
+                                    / hs[l]) * L->dense[3][i][l])));
+                        }
+                        L->log_t[L->lbase[l] + L->nlog[l]] = ev_t[ev_best];
+                        L->log_k[L->lbase[l] + L->nlog[l]] = ev_best;
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            L->log_x[L->lbase[l] + L->nlog[l]][i] = ev_y[i];
+                        }
+                        L->nlog[l] = L->nlog[l] + 1;
+                        if (ev_term[ev_best] != 0) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                            break;
+                        }
+                        ev_t[ev_best] = DBL_MAX;
+                    }
+                    if (ev_halt >= 0) {
+                        break;
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_old[ev_k][l] = ev_new[ev_k];
+                    }
+                    ev_ta = ev_tb;
+                }
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < ev_stop)) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
+                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
+                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                                L->dense[3][i][l])));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+                if (ev_halt >= 0) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = L->x[i][l] + (ev_stop - told[l]) / hs[l] * (L->dense[0][i][l] +
+                                (1.0 - (ev_stop - told[l]) / hs[l]) * (L->dense[1][i][l] +
+                                (ev_stop - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
+                                (ev_stop - told[l]) / hs[l]) * L->dense[3][i][l])));
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        L->x[i][l] = ev_y[i];
+                    }
+                    L->t[l] = ev_stop;
+                    L->stats_t[l] = L->t[l];
+                    if (L->g[l] < L->ntimes) {
+                        if (L->times[L->g[l]] <= L->t[l]) {
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                            }
+                            L->g[l] = L->g[l] + 1;
+                        }
+                    }
+                    L->code[l] = ev_halt;
+                    ok[l] = 0;
+                }
+            }
+        }
+    }
+    for (ev_k = 0; ev_k < 1; ++ev_k) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ev_old[ev_k][l] = ok[l] && ev_need[l] == 0 ? L->ev_end[ev_k][l] : L->ev_old[ev_k][l];
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[6][i][l] : L->k[0][i][l];
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+}
+
 /* One step of dop853_integrate on every lane. */
 static void dop853_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
                               double t1, long max_steps)
@@ -3023,6 +3574,782 @@ static void dop853_grid_step_lanes(struct lanes *L, const double *c, double rtol
                     L->g[l] = L->g[l] + 1;
                 }
             }
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[0][i][l] = ok[l] ? L->k[12][i][l] : L->k[0][i][l];
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+}
+
+/* One step of dop853_events on every lane. */
+static void dop853_events_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                     double t1, long max_steps)
+{
+    int last[WHEEL_SPINUP_LANES];
+    double err[WHEEL_SPINUP_LANES];
+    int run[WHEEL_SPINUP_LANES];
+    int take[WHEEL_SPINUP_LANES];
+    int lock[WHEEL_SPINUP_LANES];
+    int ok[WHEEL_SPINUP_LANES];
+    double fac[WHEEL_SPINUP_LANES];
+    double grow[WHEEL_SPINUP_LANES];
+    double err5[WHEEL_SPINUP_LANES];
+    double err3[WHEEL_SPINUP_LANES];
+    double deno[WHEEL_SPINUP_LANES];
+    double told[WHEEL_SPINUP_LANES];
+    double hs[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_new[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_j;
+    int ev_need[WHEEL_SPINUP_LANES] = {0};
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int ev_k, i, l;
+    int need;
+
+    /* begin: a step size lost in t, or no steps left, stops; a last step ends on t1 */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = L->code[l] < 0 && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = L->code[l] < 0 ? L->h[l] : L->stats_h[l];
+        told[l] = L->t[l];
+        hs[l] = L->h[l];
+    }
+
+    /* trial */
+
+    /* stage 2: t + 0.05260015195876773 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.05260015195876773 * L->k[0][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.05260015195876773 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[1]);
+
+    /* stage 3: t + 0.0789002279381516 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.0197250569845379 * L->k[0][i][l] +
+                    0.0591751709536137 * L->k[1][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.0789002279381516 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[2]);
+
+    /* stage 4: t + 0.1183503419072274 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.02958758547680685 * L->k[0][i][l] +
+                    0.08876275643042054 * L->k[2][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.1183503419072274 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[3]);
+
+    /* stage 5: t + 0.2816496580927726 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.2413651341592667 * L->k[0][i][l] -
+                    0.8845494793282861 * L->k[2][i][l] + 0.924834003261792 * L->k[3][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.2816496580927726 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[4]);
+
+    /* stage 6: t + 0.3333333333333333 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037037037037037035 * L->k[0][i][l] +
+                    0.17082860872947386 * L->k[3][i][l] + 0.12546768756682242 * L->k[4][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3333333333333333 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[5]);
+
+    /* stage 7: t + 0.25 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.037109375 * L->k[0][i][l] +
+                    0.17025221101954405 * L->k[3][i][l] + 0.06021653898045596 * L->k[4][i][l] -
+                    0.017578125 * L->k[5][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.25 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[6]);
+
+    /* stage 8: t + 0.3076923076923077 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.03709200011850479 * L->k[0][i][l] +
+                    0.17038392571223998 * L->k[3][i][l] + 0.10726203044637328 * L->k[4][i][l] -
+                    0.015319437748624402 * L->k[5][i][l] + 0.008273789163814023 * L->k[6][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.3076923076923077 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[7]);
+
+    /* stage 9: t + 0.6512820512820513 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.6241109587160757 * L->k[0][i][l] -
+                    3.3608926294469414 * L->k[3][i][l] - 0.868219346841726 * L->k[4][i][l] +
+                    27.59209969944671 * L->k[5][i][l] + 20.154067550477894 * L->k[6][i][l] -
+                    43.48988418106996 * L->k[7][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6512820512820513 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[8]);
+
+    /* stage 10: t + 0.6 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (0.47766253643826434 * L->k[0][i][l] -
+                    2.4881146199716677 * L->k[3][i][l] - 0.590290826836843 * L->k[4][i][l] +
+                    21.230051448181193 * L->k[5][i][l] + 15.279233632882423 * L->k[6][i][l] -
+                    33.28821096898486 * L->k[7][i][l] - 0.020331201708508627 * L->k[8][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.6 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[9]);
+
+    /* stage 11: t + 0.8571428571428571 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (-0.9371424300859873 * L->k[0][i][l] +
+                    5.186372428844064 * L->k[3][i][l] + 1.0914373489967295 * L->k[4][i][l] -
+                    8.149787010746927 * L->k[5][i][l] - 18.52006565999696 * L->k[6][i][l] +
+                    22.739487099350505 * L->k[7][i][l] + 2.4936055526796523 * L->k[8][i][l] -
+                    3.0467644718982196 * L->k[9][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.8571428571428571 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[10]);
+
+    /* stage 12: t + h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + L->h[l] * (2.273310147516538 * L->k[0][i][l] -
+                    10.53449546673725 * L->k[3][i][l] - 2.0008720582248625 * L->k[4][i][l] -
+                    17.9589318631188 * L->k[5][i][l] + 27.94888452941996 * L->k[6][i][l] -
+                    2.8589982771350235 * L->k[7][i][l] - 8.87285693353063 * L->k[8][i][l] +
+                    12.360567175794303 * L->k[9][i][l] + 0.6433927460157636 * L->k[10][i][l]);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->k[11]);
+
+    /* the new solution */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * (0.054293734116568765 * L->k[0][i][l] + 4.450312892752409 *
+                    L->k[5][i][l] + 1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 *
+                    L->k[7][i][l] + 0.3111643669578199 * L->k[8][i][l] - 0.1521609496625161 *
+                    L->k[9][i][l] + 0.20136540080403034 * L->k[10][i][l] + 0.04471061572777259 *
+                    L->k[11][i][l]) - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+
+    /* the error: DOP853's two estimates, combined */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        err5[l] = 0.0;
+        err3[l] = 0.0;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            double e5, e3;
+            e5 = (0.01312004499419488 * L->k[0][i][l] - 1.2251564463762044 * L->k[5][i][l] -
+                    0.4957589496572502 * L->k[6][i][l] + 1.6643771824549864 * L->k[7][i][l] -
+                    0.35032884874997366 * L->k[8][i][l] + 0.3341791187130175 * L->k[9][i][l] +
+                    0.08192320648511571 * L->k[10][i][l] - 0.022355307863886294 * L->k[11][i][l])
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            e3 = (-0.18980075407240762 * L->k[0][i][l] + 4.450312892752409 * L->k[5][i][l] +
+                    1.8915178993145003 * L->k[6][i][l] - 5.801203960010585 * L->k[7][i][l] -
+                    0.4226823213237919 * L->k[8][i][l] - 0.1521609496625161 * L->k[9][i][l] +
+                    0.20136540080403034 * L->k[10][i][l] + 0.02265179219836082 * L->k[11][i][l])
+                    / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->xnew[i][l]) > fabs(L->x[i][l]) ?
+                    fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            err5[l] = err5[l] + e5 * e5;
+            err3[l] = err3[l] + e3 * e3;
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        deno[l] = err5[l] + 1e-2 * err3[l];
+        err[l] = deno[l] > 0.0 ? fabs(L->h[l]) * err5[l] / sqrt(WHEEL_SPINUP_NX * deno[l]) : 0.0;
+    }
+
+    /* check: a NaN or Inf rejects the step; f(t + h, xnew) where it is taken */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (L->code[l] < 0 ? 11 : 0);
+        L->nonfinite[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        ok[l] = L->code[l] < 0 && !L->nonfinite[l] && err[l] <= 1.0;
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->k[12]);
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | (ok[l] && !(fabs(L->k[12][i][l]) <= DBL_MAX)));
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (ok[l] ? 1 : 0);
+    }
+
+    /* control: accept or reject by selection, and the next h */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+        take[l] = run[l] && !L->nonfinite[l] && err[l] <= 1.0;
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        fac[l] = sqrt(sqrt(sqrt(err[l]))) / 0.9;  /* h / h_new, in Hairer's form */
+        grow[l] = dmax(0.16666666666666666, dmin(3.003003003003003, fac[l]));
+        grow[l] = L->rejected_last[l] ? dmax(grow[l], 1.0) : grow[l];  /* no growth after a rejection */
+        L->code[l] = take[l] && lock[l] ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? WHEEL_SPINUP_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (run[l] && !take[l] ? 1 : 0);
+        L->err_old[l] = ok[l] ? dmax(err[l], 1e-4) : L->err_old[l];
+        L->rejected_last[l] = ok[l] ? 0 : run[l] && !take[l] ? 1 : L->rejected_last[l];
+        L->h[l] = !run[l] || (take[l] && lock[l]) ? L->h[l] : L->nonfinite[l] ? L->h[l] * 0.333 :
+                ok[l] ? L->h[l] / grow[l] : L->h[l] / dmin(3.003003003003003, fac[l]);
+    }
+
+    /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = L->xnew[i][l];
+                }
+                wheel_spinup_events(L->t[l], ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_end[ev_k][l] = ev_g[ev_k];
+                }
+                ev_need[l] = L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l] ? 1 : 0;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && L->ev_end[ev_k][l] >=
+                            0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                            L->ev_end[ev_k][l] <= 0.0) || ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX)
+                            && !(fabs(L->ev_end[ev_k][l]) <= DBL_MAX))) {
+                        ev_need[l] = 1;
+                    }
+                }
+            }
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l] && ev_need[l] != 0;
+    }
+    if (need) {
+
+        /* the dense output of order 7 */
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] + hs[l] * (0.056167502283047954 * L->k[0][i][l] +
+                        0.25350021021662483 * L->k[6][i][l] - 0.2462390374708025 * L->k[7][i][l]
+                        - 0.12419142326381637 * L->k[8][i][l] + 0.15329179827876568 *
+                        L->k[9][i][l] + 0.00820105229563469 * L->k[10][i][l] +
+                        0.007567897660545699 * L->k[11][i][l] - 0.008298 * L->k[12][i][l]);
+            }
+        }
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ts[l] = told[l] + 0.1 * hs[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[13]);
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] + hs[l] * (0.03183464816350214 * L->k[0][i][l] +
+                        0.028300909672366776 * L->k[5][i][l] + 0.053541988307438566 *
+                        L->k[6][i][l] - 0.05492374857139099 * L->k[7][i][l] -
+                        0.00010834732869724932 * L->k[10][i][l] + 0.0003825710908356584 *
+                        L->k[11][i][l] - 0.00034046500868740456 * L->k[12][i][l] +
+                        0.1413124436746325 * L->k[13][i][l]);
+            }
+        }
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ts[l] = told[l] + 0.2 * hs[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[14]);
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                L->y[i][l] = L->x[i][l] + hs[l] * (-0.42889630158379194 * L->k[0][i][l] -
+                        4.697621415361164 * L->k[5][i][l] + 7.683421196062599 * L->k[6][i][l] +
+                        4.06898981839711 * L->k[7][i][l] + 0.3567271874552811 * L->k[8][i][l] -
+                        0.0013990241651590145 * L->k[12][i][l] + 2.9475147891527724 *
+                        L->k[13][i][l] - 9.15095847217987 * L->k[14][i][l]);
+            }
+        }
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ts[l] = told[l] + 0.7777777777777778 * hs[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[15]);
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] && ev_need[l] != 0 ? L->stats_rhs_calls[l] + 3 :
+                    L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                L->dense[0][i][l] = L->xnew[i][l] - L->x[i][l];
+                L->dense[1][i][l] = hs[l] * L->k[0][i][l] - L->dense[0][i][l];
+                L->dense[2][i][l] = L->dense[0][i][l] - hs[l] * L->k[12][i][l] - L->dense[1][i][l];
+                L->dense[3][i][l] = hs[l] * (-8.428938276109013 * L->k[0][i][l] +
+                        0.5667149535193777 * L->k[5][i][l] - 3.0689499459498917 * L->k[6][i][l] +
+                        2.38466765651207 * L->k[7][i][l] + 2.117034582445028 * L->k[8][i][l] -
+                        0.871391583777973 * L->k[9][i][l] + 2.2404374302607883 * L->k[10][i][l] +
+                        0.6315787787694688 * L->k[11][i][l] - 0.08899033645133331 *
+                        L->k[12][i][l] + 18.148505520854727 * L->k[13][i][l] - 9.194632392478356
+                        * L->k[14][i][l] - 4.436036387594894 * L->k[15][i][l]);
+                L->dense[4][i][l] = hs[l] * (10.427508642579134 * L->k[0][i][l] +
+                        242.28349177525817 * L->k[5][i][l] + 165.20045171727028 * L->k[6][i][l] -
+                        374.5467547226902 * L->k[7][i][l] - 22.113666853125306 * L->k[8][i][l] +
+                        7.733432668472264 * L->k[9][i][l] - 30.674084731089398 * L->k[10][i][l] -
+                        9.332130526430229 * L->k[11][i][l] + 15.697238121770845 * L->k[12][i][l]
+                        - 31.139403219565178 * L->k[13][i][l] - 9.35292435884448 * L->k[14][i][l]
+                        + 35.81684148639408 * L->k[15][i][l]);
+                L->dense[5][i][l] = hs[l] * (19.985053242002433 * L->k[0][i][l] -
+                        387.0373087493518 * L->k[5][i][l] - 189.17813819516758 * L->k[6][i][l] +
+                        527.8081592054236 * L->k[7][i][l] - 11.57390253995963 * L->k[8][i][l] +
+                        6.8812326946963 * L->k[9][i][l] - 1.0006050966910838 * L->k[10][i][l] +
+                        0.7777137798053443 * L->k[11][i][l] - 2.778205752353508 * L->k[12][i][l]
+                        - 60.19669523126412 * L->k[13][i][l] + 84.32040550667716 * L->k[14][i][l]
+                        + 11.99229113618279 * L->k[15][i][l]);
+                L->dense[6][i][l] = hs[l] * (-25.69393346270375 * L->k[0][i][l] -
+                        154.18974869023643 * L->k[5][i][l] - 231.5293791760455 * L->k[6][i][l] +
+                        357.6391179106141 * L->k[7][i][l] + 93.40532418362432 * L->k[8][i][l] -
+                        37.45832313645163 * L->k[9][i][l] + 104.0996495089623 * L->k[10][i][l] +
+                        29.8402934266605 * L->k[11][i][l] - 43.53345659001114 * L->k[12][i][l] +
+                        96.32455395918828 * L->k[13][i][l] - 39.17726167561544 * L->k[14][i][l] -
+                        149.72683625798564 * L->k[15][i][l]);
+            }
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l] && ev_need[l] != 0;
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l] && ev_need[l] != 0) {
+                ev_stop = L->t[l];
+                ev_halt = -1;
+                ev_ta = told[l];
+                ev_j = 0;
+                for (;;) {
+                    if (ev_j >= 1) {
+                        break;
+                    }
+                    ev_j = ev_j + 1;
+                    if (ev_j < 1) {
+                        ev_tb = told[l] + (L->t[l] - told[l]) * ((double)ev_j / 1.0);
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
+                                    + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
+                                    (ev_tb - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
+                                    (ev_tb - told[l]) / hs[l]) * (L->dense[3][i][l] + (ev_tb -
+                                    told[l]) / hs[l] * (L->dense[4][i][l] + (1.0 - (ev_tb -
+                                    told[l]) / hs[l]) * (L->dense[5][i][l] + (ev_tb - told[l]) /
+                                    hs[l] * L->dense[6][i][l]))))));
+                        }
+                        wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = ev_g[ev_k];
+                        }
+                    } else {
+                        ev_tb = L->t[l];
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = L->ev_end[ev_k][l];
+                        }
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_t[ev_k] = DBL_MAX;
+                        if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] >=
+                                0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                ev_new[ev_k] <= 0.0)) {
+                            ev_a = ev_ta;
+                            ev_b = ev_tb;
+                            ev_ga = L->ev_old[ev_k][l];
+                            ev_gb = ev_new[ev_k];
+                            ev_side = 0;
+                            ev_it = 0;
+                            for (;;) {
+                                if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                            (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
+                                            * (L->dense[1][i][l] + (ev_m - told[l]) / hs[l] *
+                                            (L->dense[2][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
+                                            * (L->dense[3][i][l] + (ev_m - told[l]) / hs[l] *
+                                            (L->dense[4][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
+                                            * (L->dense[5][i][l] + (ev_m - told[l]) / hs[l] *
+                                            L->dense[6][i][l]))))));
+                                }
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                ev_gm = ev_g[ev_k];
+                                if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                        0.0))) {
+                                    ev_a = ev_m;
+                                    ev_ga = ev_gm;
+                                    if (ev_side == -1) {
+                                        ev_gb = 0.5 * ev_gb;
+                                    }
+                                    ev_side = -1;
+                                } else {
+                                    ev_b = ev_m;
+                                    ev_gb = ev_gm;
+                                    if (ev_side == 1) {
+                                        ev_ga = 0.5 * ev_ga;
+                                    }
+                                    ev_side = 1;
+                                }
+                            }
+                            ev_t[ev_k] = ev_b;
+                        } else {
+                            if ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_f = ev_ta;
+                                ev_gf = L->ev_old[ev_k][l];
+                                ev_b = ev_tb;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                    if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) /
+                                                hs[l]) * (L->dense[1][i][l] + (ev_m - told[l]) /
+                                                hs[l] * (L->dense[2][i][l] + (1.0 - (ev_m -
+                                                told[l]) / hs[l]) * (L->dense[3][i][l] + (ev_m -
+                                                told[l]) / hs[l] * (L->dense[4][i][l] + (1.0 -
+                                                (ev_m - told[l]) / hs[l]) * (L->dense[5][i][l] +
+                                                (ev_m - told[l]) / hs[l] * L->dense[6][i][l]))))));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_b = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_gf >=
+                                        0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                        ev_gf <= 0.0)) {
+                                    ev_a = ev_ta;
+                                    ev_b = ev_f;
+                                    ev_ga = L->ev_old[ev_k][l];
+                                    ev_gb = ev_gf;
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                    (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
+                                                    / hs[l]) * (L->dense[1][i][l] + (ev_m -
+                                                    told[l]) / hs[l] * (L->dense[2][i][l] + (1.0
+                                                    - (ev_m - told[l]) / hs[l]) *
+                                                    (L->dense[3][i][l] + (ev_m - told[l]) / hs[l]
+                                                    * (L->dense[4][i][l] + (1.0 - (ev_m -
+                                                    told[l]) / hs[l]) * (L->dense[5][i][l] +
+                                                    (ev_m - told[l]) / hs[l] *
+                                                    L->dense[6][i][l]))))));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
+                            }
+                        }
+                    }
+                    for (;;) {
+                        ev_best = -1;
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] <
+                                    ev_t[ev_best])) {
+                                ev_best = ev_k;
+                            }
+                        }
+                        if (ev_best < 0) {
+                            break;
+                        }
+                        if (L->nlog[l] >= L->capacity) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                            break;
+                        }
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            ev_y[i] = L->x[i][l] + (ev_t[ev_best] - told[l]) / hs[l] *
+                                    (L->dense[0][i][l] + (1.0 - (ev_t[ev_best] - told[l]) /
+                                    hs[l]) * (L->dense[1][i][l] + (ev_t[ev_best] - told[l]) /
+                                    hs[l] * (L->dense[2][i][l] + (1.0 - (ev_t[ev_best] - told[l])
+                                    / hs[l]) * (L->dense[3][i][l] + (ev_t[ev_best] - told[l]) /
+                                    hs[l] * (L->dense[4][i][l] + (1.0 - (ev_t[ev_best] - told[l])
+                                    / hs[l]) * (L->dense[5][i][l] + (ev_t[ev_best] - told[l]) /
+                                    hs[l] * L->dense[6][i][l]))))));
+                        }
+                        L->log_t[L->lbase[l] + L->nlog[l]] = ev_t[ev_best];
+                        L->log_k[L->lbase[l] + L->nlog[l]] = ev_best;
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            L->log_x[L->lbase[l] + L->nlog[l]][i] = ev_y[i];
+                        }
+                        L->nlog[l] = L->nlog[l] + 1;
+                        if (ev_term[ev_best] != 0) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                            break;
+                        }
+                        ev_t[ev_best] = DBL_MAX;
+                    }
+                    if (ev_halt >= 0) {
+                        break;
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_old[ev_k][l] = ev_new[ev_k];
+                    }
+                    ev_ta = ev_tb;
+                }
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < ev_stop)) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] *
+                                (L->dense[0][i][l] + (1.0 - frac[l]) * (L->dense[1][i][l] +
+                                frac[l] * (L->dense[2][i][l] + (1.0 - frac[l]) *
+                                (L->dense[3][i][l] + frac[l] * (L->dense[4][i][l] + (1.0 -
+                                frac[l]) * (L->dense[5][i][l] + frac[l] * L->dense[6][i][l]))))));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+                if (ev_halt >= 0) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = L->x[i][l] + (ev_stop - told[l]) / hs[l] * (L->dense[0][i][l] +
+                                (1.0 - (ev_stop - told[l]) / hs[l]) * (L->dense[1][i][l] +
+                                (ev_stop - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
+                                (ev_stop - told[l]) / hs[l]) * (L->dense[3][i][l] + (ev_stop -
+                                told[l]) / hs[l] * (L->dense[4][i][l] + (1.0 - (ev_stop -
+                                told[l]) / hs[l]) * (L->dense[5][i][l] + (ev_stop - told[l]) /
+                                hs[l] * L->dense[6][i][l]))))));
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        L->x[i][l] = ev_y[i];
+                    }
+                    L->t[l] = ev_stop;
+                    L->stats_t[l] = L->t[l];
+                    if (L->g[l] < L->ntimes) {
+                        if (L->times[L->g[l]] <= L->t[l]) {
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                            }
+                            L->g[l] = L->g[l] + 1;
+                        }
+                    }
+                    L->code[l] = ev_halt;
+                    ok[l] = 0;
+                }
+            }
+        }
+    }
+    for (ev_k = 0; ev_k < 1; ++ev_k) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ev_old[ev_k][l] = ok[l] && ev_need[l] == 0 ? L->ev_end[ev_k][l] : L->ev_old[ev_k][l];
         }
     }
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
@@ -4652,6 +5979,9 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     int i;
     const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
                                stats);
+    if (L->nlogs) {
+        L->nlogs[traj] = 0;
+    }
     if (code > WHEEL_SPINUP_ODE_OK || (code == WHEEL_SPINUP_ODE_OK && !L->out)) {
         return code;
     }
@@ -4664,6 +5994,17 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
             L->out[L->base[l]][i] = L->x[i][l];
         }
         L->g[l] = 1;
+    }
+    if (L->nlogs) {  /* events: the log empty, g at the start (a crossing's first side) */
+        double g0[1];
+        L->nlog[l] = 0;
+        L->lbase[l] = (long)traj * L->capacity;
+        if (code <= WHEEL_SPINUP_ODE_OK) {
+            wheel_spinup_events(t0, x, c, g0);
+            for (i = 0; i < 1; ++i) {
+                L->ev_old[i][l] = g0[i];
+            }
+        }
     }
     if (code >= 0) {
         return code;
@@ -4732,6 +6073,9 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, wheel_spinup_
             for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                 xs[L->traj[l] * WHEEL_SPINUP_NX + (size_t)i] = L->x[i][l];
             }
+            if (L->nlogs) {
+                L->nlogs[L->traj[l]] = L->nlog[l];
+            }
             put_result(L->traj[l], L->code[l], &st, stats, codes);
             failed += (size_t)(L->code[l] != WHEEL_SPINUP_ODE_OK);
             L->busy[l] = 0;
@@ -4747,8 +6091,10 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, wheel_spinup_
 static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t begin, size_t end,
                          double t0, double t1, double *xs, const double *c, double rtol,
                          double atol, double h0, long max_steps, long ntimes,
-                         const double *times, double (*out)[WHEEL_SPINUP_NX], wheel_spinup_stats *stats,
-                         int *codes)
+                         const double *times, double (*out)[WHEEL_SPINUP_NX],
+                         long capacity, double *log_t, int *log_k, double (*log_x)[WHEEL_SPINUP_NX],
+                         long *nlog,
+                         wheel_spinup_stats *stats, int *codes)
 {
     struct lanes L;
     size_t next = begin, failed = 0;
@@ -4757,6 +6103,11 @@ static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t beg
     L.ntimes = ntimes;
     L.times = times;
     L.out = out;
+    L.capacity = capacity;
+    L.log_t = log_t;
+    L.log_k = log_k;
+    L.log_x = log_x;
+    L.nlogs = nlog;
     for (;;) {
         busy = 0;
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
@@ -4786,7 +6137,10 @@ static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t beg
 static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, double t0,
                          double t1, double *xs, const double *c, double rtol, double atol,
                          double h0, long max_steps, long ntimes, const double *times,
-                         double (*out)[WHEEL_SPINUP_NX], wheel_spinup_stats *stats, int *codes)
+                         double (*out)[WHEEL_SPINUP_NX],
+                         long capacity, double *log_t, int *log_k, double (*log_x)[WHEEL_SPINUP_NX],
+                         long *nlog,
+                         wheel_spinup_stats *stats, int *codes)
 {
     size_t failed = 0;
 #ifdef _OPENMP
@@ -4799,11 +6153,13 @@ static size_t pair_batch(lanes_step step, int order, double rtol_min, size_t n, 
         const size_t begin = (size_t)b * chunk;
         const size_t end = n - begin < chunk ? n : begin + chunk;
         failed += pair_lanes(step, order, rtol_min, begin, end, t0, t1, xs, c, rtol, atol, h0,
-                             max_steps, ntimes, times, out, stats, codes);
+                             max_steps, ntimes, times, out, capacity, log_t,
+                             log_k, log_x, nlog, stats, codes);
     }
 #else
     failed = pair_lanes(step, order, rtol_min, 0, n, t0, t1, xs, c, rtol, atol, h0, max_steps,
-                        ntimes, times, out, stats, codes);
+                        ntimes, times, out, capacity, log_t, log_k, log_x,
+                        nlog, stats, codes);
 #endif
     return failed;
 }
@@ -5860,8 +7216,9 @@ int wheel_spinup_dopri5_events(long ntimes, const double *times, double *x, cons
             (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Each state its _events call, with its own log
-   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+/* NULL stats or codes: not wanted. Each state its _events, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]), WHEEL_SPINUP_LANES states at
+   once in SIMD lanes (the search lane by lane); every core under OpenMP. */
 size_t wheel_spinup_dopri5_events_batch(size_t n, long ntimes, const double *times, double *x,
                                         const double *c, double rtol, double atol, double h0,
                                         long max_steps, double *out, long capacity,
@@ -5870,6 +7227,12 @@ size_t wheel_spinup_dopri5_events_batch(size_t n, long ntimes, const double *tim
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(dopri5_events_step_lanes, 5, WHEEL_SPINUP_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+                          (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -5902,7 +7265,7 @@ size_t wheel_spinup_dopri5_grid_batch(size_t n, long ntimes, const double *times
     if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dopri5_grid_step_lanes, 5, WHEEL_SPINUP_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
-                          times, (double (*)[WHEEL_SPINUP_NX])out, stats, codes);
+                          times, (double (*)[WHEEL_SPINUP_NX])out, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
@@ -7215,8 +8578,9 @@ int wheel_spinup_dop853_events(long ntimes, const double *times, double *x, cons
             (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Each state its _events call, with its own log
-   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+/* NULL stats or codes: not wanted. Each state its _events, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]), WHEEL_SPINUP_LANES states at
+   once in SIMD lanes (the search lane by lane); every core under OpenMP. */
 size_t wheel_spinup_dop853_events_batch(size_t n, long ntimes, const double *times, double *x,
                                         const double *c, double rtol, double atol, double h0,
                                         long max_steps, double *out, long capacity,
@@ -7225,6 +8589,12 @@ size_t wheel_spinup_dop853_events_batch(size_t n, long ntimes, const double *tim
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(dop853_events_step_lanes, 8, WHEEL_SPINUP_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+                          (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -7257,7 +8627,7 @@ size_t wheel_spinup_dop853_grid_batch(size_t n, long ntimes, const double *times
     if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(dop853_grid_step_lanes, 8, WHEEL_SPINUP_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
-                          times, (double (*)[WHEEL_SPINUP_NX])out, stats, codes);
+                          times, (double (*)[WHEEL_SPINUP_NX])out, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
@@ -8357,7 +9727,7 @@ size_t wheel_spinup_rodas4_grid_batch(size_t n, long ntimes, const double *times
     if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(rodas4_grid_step_lanes, 4, WHEEL_SPINUP_ODE_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
-                          times, (double (*)[WHEEL_SPINUP_NX])out, stats, codes);
+                          times, (double (*)[WHEEL_SPINUP_NX])out, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
@@ -11978,7 +13348,7 @@ size_t wheel_spinup_taylor_grid_batch(size_t n, long ntimes, const double *times
     if (n > 1 && grid_ok(ntimes, times)) {
         return pair_batch(taylor_grid_step_lanes, 0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL,
                           n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
-                          times, (double (*)[WHEEL_SPINUP_NX])out, stats, codes);
+                          times, (double (*)[WHEEL_SPINUP_NX])out, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
@@ -12026,7 +13396,7 @@ size_t wheel_spinup_dopri5_batch(size_t n, double t0, double t1, double *x, cons
     long i;
     if (n > 1) {
         return pair_batch(dopri5_step_lanes, 5, WHEEL_SPINUP_ODE_MIN_RTOL, n,
-                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
@@ -12052,7 +13422,7 @@ size_t wheel_spinup_dop853_batch(size_t n, double t0, double t1, double *x, cons
     long i;
     if (n > 1) {
         return pair_batch(dop853_step_lanes, 8, WHEEL_SPINUP_ODE_MIN_RTOL, n,
-                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
@@ -12078,7 +13448,7 @@ size_t wheel_spinup_rodas4_batch(size_t n, double t0, double t1, double *x, cons
     long i;
     if (n > 1) {
         return pair_batch(rodas4_step_lanes, 4, WHEEL_SPINUP_ODE_MIN_RTOL, n,
-                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
@@ -12125,7 +13495,7 @@ size_t wheel_spinup_taylor_batch(size_t n, double t0, double t1, double *x, cons
     long i;
     if (n > 1) {
         return pair_batch(taylor_step_lanes, 0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL, n,
-                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, 0, NULL, NULL, NULL, NULL, stats, codes);
     }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)

@@ -550,22 +550,24 @@ def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]
 
 
 def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: E,
-                   end: E) -> list[S]:  # fmt: skip
+                   end: E, base: E | None = None) -> list[S]:  # fmt: skip
     """g at the grid.pieces - 1 points between the step's ends (on the
     interpolant; g at its end is needed's); in each piece, each event whose
     g changed sign as its direction asks (_crossed), located (or whose g
     turned NaN or infinite there: a crossing before its last finite point,
     _last_finite); the piece's crossings in time order into the log, up to the first terminal
-    one or a full log, where the step stops (ev_stop, ev_halt its code)."""
+    one or a full log, where the step stops (ev_stop, ev_halt its code).
+    base: the log's first row (LBASE over lanes: the lane's trajectory's)."""
     ne, k, j = Int(len(grid.events)), Var("ev_k"), Var("ev_j")
+    entry = NLOG if base is None else base + NLOG
     ta, tb, g_end = Var("ev_ta"), Var("ev_tb"), Var("ev_end")
     best = EV_T[EV_BEST]
     earlier = or_(cmp(EV_BEST, "<", 0), cmp(EV_T[k], "<", best))
     log = [
         *_state_at(dense, at, best),
-        assign(Var("log_t")[NLOG], best),
-        assign(Var("log_k")[NLOG], EV_BEST),
-        For("i", NX, (assign(Var("log_x")[NLOG, i], EV_Y[i]),)),
+        assign(Var("log_t")[entry], best),
+        assign(Var("log_k")[entry], EV_BEST),
+        For("i", NX, (assign(Var("log_x")[entry, i], EV_Y[i]),)),
         inc(NLOG, 1),
     ]
     point = start + (end - start) * (fn("real", j) / float(grid.pieces))
@@ -614,20 +616,104 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
     ]  # fmt: skip
 
 
-def events_stop(dense: Interpolant, at: Callable[[E], E], counted: bool) -> list[S]:
+def events_stop(dense: Interpolant, at: Callable[[E], E], counted: bool, row: E = G,
+                stop: tuple[S, ...] | None = None) -> list[S]:  # fmt: skip
     """A step that stops at an event (or a full log): x := the state there
-    (on the interpolant), t and the statistics, the grid time there, the
-    code."""
-    there: list[S] = [For("i", NX, (assign(OUT[G, i], x[i]),)), inc(G, 1)]
+    (on the interpolant), t and the statistics, the grid time there (row:
+    out's row of g), the code (returned; over lanes, stop: the statements
+    that end the lane's trajectory with ev_halt instead)."""
+    there: list[S] = [For("i", NX, (assign(OUT[row, i], x[i]),)), inc(G, 1)]
     return [
         If(cmp(EV_HALT, ">=", 0), (
             *_state_at(dense, at, EV_STOP),
             For("i", NX, (assign(x[i], EV_Y[i]),)),
             assign(t, EV_STOP), assign(stat("t"), t), *([] if counted else [count("accepted", 1)]),
             If(cmp(G, "<", NTIMES), (If(cmp(TIMES[G], "<=", t), tuple(there)),)),
-            Return(EV_HALT),
+            *((Return(EV_HALT),) if stop is None else stop),
         )),
     ]  # fmt: skip
+
+
+LBASE = Var("lbase")
+"""Over lanes: a lane's first entry in the log (its trajectory's)."""
+
+
+def lane_event_state(grid: Grid) -> tuple[Decl, ...]:
+    """What struct lanes holds for the events: per lane g at the step's
+    start and end (ev_old, ev_end), the entries logged (nlog) and the
+    first one's row (lbase); the same on every lane: capacity (intent "in")
+    and what the lanes write (intent "out"), the log (capacity entries a
+    trajectory) and each trajectory's count (nlogs)."""
+    ne = len(grid.events)
+    return (Decl("ev_old", "double", (ne,), "inout"), Decl("ev_end", "double", (ne,), "inout"),
+            Decl("nlog", "long", (), "inout"), Decl("lbase", "long", (), "inout"),
+            Decl("capacity", "long"), Decl("log_t", "double", ("capacity",), "out"),
+            Decl("log_k", "int", ("capacity",), "out"),
+            Decl("log_x", "double", ("capacity", "NX"), "out"),
+            Decl("nlogs", "long", ("capacity",), "out"))  # fmt: skip
+
+
+def lane_event_locals(grid: Grid) -> tuple[Decl, ...]:
+    """event_locals of a step over lanes: the search runs lane by lane, so
+    its values are one lane's at a time (intent "in": one of each, not one
+    per lane), but for ev_need, per lane (0 at first: a lane not taken
+    reads it only under ok, which gcc cannot tell); ev_old and ev_end are
+    the struct's."""
+    ne = len(grid.events)
+    return (
+        *(d for d in event_locals(grid) if d.values),
+        *(Decl(f"ev_{n}", "double", (ne,), "in") for n in ("new", "g", "t")),
+        Decl("ev_y", "double", ("NX",), "in"),
+        *(
+            real(f"ev_{n}", "in")
+            for n in ("a", "b", "ga", "gb", "m", "gm", "f", "gf", "stop", "ta", "tb")
+        ),
+        *(Decl(f"ev_{n}", "int", (), "in") for n in ("side", "best", "halt", "it", "j")),
+        Decl("ev_need", "int", (), "inout", init=Num(0.0)),
+    )
+
+
+def lane_events(grid: Grid, dense: Interpolant, ok: Var, cd: Var, end: E, start: E, step: E,
+                row: E) -> list[S]:  # fmt: skip
+    """inside with events for a branch-free step over lanes, after its
+    selections (t its end, the step counted), each lane as _events runs it:
+    g at the step's end and whether the lane needs its interpolant (a grid
+    time or a sign change in its step; every lane with pieces), lane by
+    lane on the scalar <prefix>_events; the coefficients where needed (the
+    rhs when any lane needs it); the search, the log and the grid lane by
+    lane on the lanes that need them; ev_old := ev_end on the others. A
+    stop at an event sets the lane's code and ok := 0 (the step's end is
+    not taken)."""
+    ne, k = Int(len(grid.events)), Var("ev_k")
+    need, g_end = Var("ev_need"), Var("ev_end")
+    at = theta_at(dense, end, start, step)
+    wanted: list[S] = [assign(need, 1)] if grid.pieces > 1 else [
+        assign(need, sel(due(end), Int(1), Int(0))),
+        For("ev_k", ne, (
+            If(or_(_crossed(k, g_end[k]), _turned_nan(k, g_end[k])), (assign(need, 1),)),)),
+    ]  # fmt: skip
+    ends = If(ok, (
+        For("i", NX, (assign(EV_Y[i], xnew[i]),)),
+        Call("events", (end, EV_Y, c, EV_G)),
+        For("ev_k", ne, (assign(g_end[k], EV_G[k]),)),
+        *wanted,
+    ))  # fmt: skip
+    halt = (assign(cd, EV_HALT), assign(ok, Bool(False)))
+    search = If(and_(ok, cmp(need, "!=", 0)), (
+        *events_in_step(grid, dense, at, start, end, LBASE),
+        writes(dense, at, EV_STOP, row),
+        *events_stop(dense, at, True, row, halt),
+    ))  # fmt: skip
+    coefficients = (
+        [If(and_(ok, cmp(need, "!=", 0)), dense.coefficients, own=dense.scratch)]
+        if dense.coefficients else []
+    )  # fmt: skip
+    return [
+        ends,
+        *coefficients,
+        search,
+        For("ev_k", ne, (If(and_(ok, cmp(need, "==", 0)), (assign(EV_OLD[k], g_end[k]),)),)),
+    ]
 
 
 def reached(row: E = G, ok: E | None = None) -> list[S]:

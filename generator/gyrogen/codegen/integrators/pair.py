@@ -112,11 +112,13 @@ def parts(
     grid: bool | driver.Grid = False,
     row: E = driver.G,
     knots: driver.Knots = (),
+    lanes: bool = False,
 ) -> tuple[list[S], list[S]]:
     """One step of pair m on one trajectory, as the five parts: begin, and
     the other four. grid: the output grid's too (grid_step, f at the last
     step's end, and the grid times an accepted step passes; row: out's row
-    of grid time g). knots: the table times a step ends on (driver.knot_clip)."""
+    of grid time g). knots: the table times a step ends on (driver.knot_clip).
+    lanes: the step over lanes (with events, driver.lane_events)."""
     ctl = m.control
     assert isinstance(ctl, registry.PairControl)
     tab = m.tableau
@@ -167,20 +169,30 @@ def parts(
     first: list[S] = [For("i", NX, (assign(k[0, i], k[m.fnew, i]),))]
     accept: list[S] = [
         Comment("accept: x := xnew; f(t + h, xnew) is the next step's first stage"),
-        *_accept(m, quaternion, grid, ok, first, row),
+        *_accept(m, quaternion, grid, ok, first, row, cd if lanes else None),
     ]
     return begin, [Comment("trial"), *trial(m), *check, *control, *accept]
 
 
 def _accept(
-    m: Method, quaternion: bool, grid: bool | driver.Grid, ok: Var, first: list[S], row: E
+    m: Method,
+    quaternion: bool,
+    grid: bool | driver.Grid,
+    ok: Var,
+    first: list[S],
+    row: E,
+    lanes: Var | None = None,
 ) -> list[S]:
     """accept, under ok: with the grid, the grid times the step passes first
-    and its end after (driver.passed; with events, driver.inside)."""
+    and its end after (driver.passed; with events, driver.inside, or over
+    lanes driver.lane_events, which stops a lane with its code, lanes)."""
     taken = (*accepted(quaternion, known=True), *first)
     if not grid:
         return [If(ok, taken)]
     told, hs = Var("told"), Var("hs")
+    if isinstance(grid, driver.Grid) and grid.events and lanes is not None:
+        events = driver.lane_events(grid, interpolant(m), ok, lanes, t, told, hs, row)
+        return [*events, If(ok, taken), *driver.reached(row, ok)]
     if isinstance(grid, driver.Grid) and grid.events:
         inside = driver.inside(interpolant(m), t, told, hs, grid, counted=True)
         return [If(ok, (*inside, *taken, *driver.reached()))]
@@ -247,19 +259,27 @@ def integrate(
     return Func(f"{m.name}_integrate", driver.PARAMS, tuple(body), "int", locals_, doc)
 
 
-def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Knots = ()) -> Func:
+def lanes_step(
+    m: Method, quaternion: bool, grid: bool | driver.Grid = False, knots: driver.Knots = ()
+) -> Func:
     """m.name_step_lanes: one step of every lane of a struct lanes; with
     grid, m.name_grid_step_lanes: one step of m.name_grid (its grid and
-    dense rows in the struct, driver.lane_grid_state)."""
-    begin, rest = parts(m, quaternion, grid, driver.BASE + driver.G, knots)
+    dense rows in the struct, driver.lane_grid_state); with events,
+    m.name_events_step_lanes: one step of m.name_events (the events' values
+    and log in the struct too, driver.lane_event_state)."""
+    begin, rest = parts(m, quaternion, grid, driver.BASE + driver.G, knots, lanes=True)
     step = begin + rest
     if not grid:
         doc = (f"One step of {m.name}_integrate on every lane.",)
         locals_ = (*used_locals(step), *driver.knot_locals(knots))
         return Func(f"{m.name}_step_lanes", driver.LANE_PARAMS, tuple(step), None, locals_, doc)
     locals_ = (*used_locals(step), *driver.knot_locals(knots), *driver.lane_grid_locals(step))
-    doc = (f"One step of {m.name}_grid on every lane.",)
-    return Func(f"{m.name}_grid_step_lanes", driver.LANE_PARAMS, tuple(step), None, locals_, doc)
+    variant = driver.variant(grid)
+    if isinstance(grid, driver.Grid) and grid.events:
+        locals_ += driver.lane_event_locals(grid)
+    doc = (f"One step of {m.name}_{variant} on every lane.",)
+    name = f"{m.name}_{variant}_step_lanes"
+    return Func(name, driver.LANE_PARAMS, tuple(step), None, locals_, doc)
 
 
 def lane_state(krows: int, pairs: list[Method]) -> dict[str, Decl]:

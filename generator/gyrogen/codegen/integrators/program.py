@@ -80,6 +80,7 @@ def _pair(m: Method, g: Given) -> Parts:
         [
             pair.lanes_step(m, g.quaternion, knots=g.knots),
             pair.lanes_step(m, g.quaternion, True, g.knots),
+            *([pair.lanes_step(m, g.quaternion, g.events, g.knots)] if g.events else []),
         ],
         init=[s for s in pair.start_state() if s not in common_start],
     )
@@ -187,6 +188,8 @@ def program(
     for d in (d for p in parts for d in p.state):
         state[d.name] = larger(state.get(d.name), d)
     state |= {d.name: d for d in driver.lane_grid_state()} if lanes else {}
+    if events is not None and any(f.name.endswith("_events_step_lanes") for f in lanes):
+        state |= {d.name: d for d in driver.lane_event_state(events)}
     init = common.start_state() if lanes else []
     for s in (s for p in parts for s in p.init):
         init += [] if s in init else [s]
@@ -286,11 +289,11 @@ def c_text(
     # the 8-byte arrays first, each LANES doubles long, so that in a struct
     # aligned to 64 bytes every one starts on a cache line (ints, then what
     # every lane shares, last)
-    for d in sorted(p.state.values(), key=lambda d: (d.intent == "in", d.type != "double"
+    for d in sorted(p.state.values(), key=lambda d: (lanes.shared(d.name), d.type != "double"
                                                      and d.type != "long")):  # fmt: skip
         name = lanes.field(d.name).removeprefix("L->")
-        if d.intent == "in":
-            fields.append(f"{c.declaration(Decl(name, d.type, d.shape), True)};")
+        if lanes.shared(d.name):
+            fields.append(f"{c.declaration(Decl(name, d.type, d.shape, d.intent), True)};")
             continue
         dims = "".join(f"[{c.extent(n)}]" for n in d.shape)
         fields.append(
@@ -308,6 +311,7 @@ def c_text(
         "fields": fields,
         "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
         "grid_init": "\n".join(lanes.one_lane(tuple(driver.grid_first(driver.BASE)), 2)),
+        "lane_events": int(p.state["ev_old"].shape[0]) if "ev_old" in p.state else 0,
     }
 
 

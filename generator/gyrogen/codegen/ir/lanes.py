@@ -84,7 +84,7 @@ class LanesPrinter(CPrinter):
         """A value of the struct the same on every lane (intent "in"): the
         output grid's times and rows."""
         d = self.state.get(name)
-        return d is not None and d.intent == "in"
+        return d is not None and d.intent in ("in", "out")
 
     def var(self, name: str) -> tuple[str, int]:
         if name in self.state:
@@ -276,12 +276,22 @@ class LanesPrinter(CPrinter):
         """A branch run lane by lane, as the single trajectory runs it: one
         that loops until a break, or writes what every lane shares (a row
         of the output grid: by selection, a lane would write rows that are
-        not its own). Else a branch around a call runs the call on every
-        lane when any lane needs it, its values by selection."""
+        not its own), or calls a scalar function on one lane's values (an
+        array the same on every lane, intent "in", holds them: the events
+        at a lane's step end). Else a branch around a call runs the call on
+        every lane when any lane needs it, its values by selection."""
         inner = nested(s)
-        return any(isinstance(x, Loop) for x in inner) or any(
-            isinstance(x, Assign) and isinstance(x.target, At) and self.shared(x.target.name)
-            for x in inner
+        return (
+            any(isinstance(x, Loop) for x in inner)
+            or any(
+                isinstance(x, Assign) and isinstance(x.target, At) and self.shared(x.target.name)
+                for x in inner
+            )
+            or any(
+                isinstance(x, Call)
+                and any(isinstance(a, Var) and self.uniform(a.name) for a in x.args)
+                for x in inner
+            )
         )
 
     def one_lane(self, body: tuple[S, ...], depth: int) -> list[str]:
