@@ -2661,6 +2661,89 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                     }
                                     ev_t[ev_k] = ev_b;
                                 }
+                            } else {
+                                if (!(fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && (fabs(ev_new[ev_k])
+                                        <= DBL_MAX)) {
+                                    ev_a = ev_ta;
+                                    ev_f = ev_tb;
+                                    ev_gf = ev_new[ev_k];
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                        if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                    (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
+                                                    / hs[l]) * (L->dense[1][i][l] + (ev_m -
+                                                    told[l]) / hs[l] * (L->dense[2][i][l] + (1.0
+                                                    - (ev_m - told[l]) / hs[l]) *
+                                                    L->dense[3][i][l])));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                            ev_f = ev_m;
+                                            ev_gf = ev_g[ev_k];
+                                        } else {
+                                            ev_a = ev_m;
+                                        }
+                                    }
+                                    if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >=
+                                            0.0) || (ev_dir[ev_k] != 1 && ev_gf > 0.0 &&
+                                            ev_new[ev_k] <= 0.0)) {
+                                        ev_a = ev_f;
+                                        ev_b = ev_tb;
+                                        ev_ga = ev_gf;
+                                        ev_gb = ev_new[ev_k];
+                                        ev_side = 0;
+                                        ev_it = 0;
+                                        for (;;) {
+                                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                                break;
+                                            }
+                                            ev_it = ev_it + 1;
+                                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                break;
+                                            }
+                                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                                ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                        (L->dense[0][i][l] + (1.0 - (ev_m -
+                                                        told[l]) / hs[l]) * (L->dense[1][i][l] +
+                                                        (ev_m - told[l]) / hs[l] *
+                                                        (L->dense[2][i][l] + (1.0 - (ev_m -
+                                                        told[l]) / hs[l]) * L->dense[3][i][l])));
+                                            }
+                                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                            ev_gm = ev_g[ev_k];
+                                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0)
+                                                    && !(ev_ga > 0.0))) {
+                                                ev_a = ev_m;
+                                                ev_ga = ev_gm;
+                                                if (ev_side == -1) {
+                                                    ev_gb = 0.5 * ev_gb;
+                                                }
+                                                ev_side = -1;
+                                            } else {
+                                                ev_b = ev_m;
+                                                ev_gb = ev_gm;
+                                                if (ev_side == 1) {
+                                                    ev_ga = 0.5 * ev_ga;
+                                                }
+                                                ev_side = 1;
+                                            }
+                                        }
+                                        ev_t[ev_k] = ev_b;
+                                    }
+                                }
                             }
                         }
                     }
@@ -4249,6 +4332,98 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                         }
                                     }
                                     ev_t[ev_k] = ev_b;
+                                }
+                            } else {
+                                if (!(fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && (fabs(ev_new[ev_k])
+                                        <= DBL_MAX)) {
+                                    ev_a = ev_ta;
+                                    ev_f = ev_tb;
+                                    ev_gf = ev_new[ev_k];
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                        if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                            break;
+                                        }
+                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                    (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
+                                                    / hs[l]) * (L->dense[1][i][l] + (ev_m -
+                                                    told[l]) / hs[l] * (L->dense[2][i][l] + (1.0
+                                                    - (ev_m - told[l]) / hs[l]) *
+                                                    (L->dense[3][i][l] + (ev_m - told[l]) / hs[l]
+                                                    * (L->dense[4][i][l] + (1.0 - (ev_m -
+                                                    told[l]) / hs[l]) * (L->dense[5][i][l] +
+                                                    (ev_m - told[l]) / hs[l] *
+                                                    L->dense[6][i][l]))))));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                            ev_f = ev_m;
+                                            ev_gf = ev_g[ev_k];
+                                        } else {
+                                            ev_a = ev_m;
+                                        }
+                                    }
+                                    if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >=
+                                            0.0) || (ev_dir[ev_k] != 1 && ev_gf > 0.0 &&
+                                            ev_new[ev_k] <= 0.0)) {
+                                        ev_a = ev_f;
+                                        ev_b = ev_tb;
+                                        ev_ga = ev_gf;
+                                        ev_gb = ev_new[ev_k];
+                                        ev_side = 0;
+                                        ev_it = 0;
+                                        for (;;) {
+                                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                                break;
+                                            }
+                                            ev_it = ev_it + 1;
+                                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                break;
+                                            }
+                                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                                ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
+                                                        (L->dense[0][i][l] + (1.0 - (ev_m -
+                                                        told[l]) / hs[l]) * (L->dense[1][i][l] +
+                                                        (ev_m - told[l]) / hs[l] *
+                                                        (L->dense[2][i][l] + (1.0 - (ev_m -
+                                                        told[l]) / hs[l]) * (L->dense[3][i][l] +
+                                                        (ev_m - told[l]) / hs[l] *
+                                                        (L->dense[4][i][l] + (1.0 - (ev_m -
+                                                        told[l]) / hs[l]) * (L->dense[5][i][l] +
+                                                        (ev_m - told[l]) / hs[l] *
+                                                        L->dense[6][i][l]))))));
+                                            }
+                                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                            ev_gm = ev_g[ev_k];
+                                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0)
+                                                    && !(ev_ga > 0.0))) {
+                                                ev_a = ev_m;
+                                                ev_ga = ev_gm;
+                                                if (ev_side == -1) {
+                                                    ev_gb = 0.5 * ev_gb;
+                                                }
+                                                ev_side = -1;
+                                            } else {
+                                                ev_b = ev_m;
+                                                ev_gb = ev_gm;
+                                                if (ev_side == 1) {
+                                                    ev_ga = 0.5 * ev_ga;
+                                                }
+                                                ev_side = 1;
+                                            }
+                                        }
+                                        ev_t[ev_k] = ev_b;
+                                    }
                                 }
                             }
                         }
