@@ -464,41 +464,32 @@ a step with a sign change or a grid time in it (the default scene's three
 such events: 1.6-2.5x the plain run with 8 pieces, `make bench-events`)."""
 
 
-def _last_finite(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) -> list[S]:
-    """ev_f, ev_gf := the last time within [start, end] found where event
-    k's g is finite, and g there, by bisection between start (g finite:
-    ev_old[k]) and end (not finite), until no double lies between or
-    ev_iterations evaluations: where g turns NaN within a piece, a crossing
-    before that is searched in [start, ev_f]."""
+def _finite_edge(
+    dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E, last: bool
+) -> list[S]:
+    """ev_f, ev_gf := the edge within [start, end] where event k's g turns
+    NaN (last: the last time found where g is finite, g finite at start,
+    ev_old[k], and not at end) or turns finite (not last: the first such
+    time, g not finite at start and finite at end, ev_new[k]), and g there,
+    by bisection until no double lies between or ev_iterations evaluations.
+    A crossing is then searched in [start, ev_f] (last) or [ev_f, end]."""
+    other = EV_B if last else EV_A  # the bracket's end where g is not finite
+    lo, hi = (EV_F, other) if last else (other, EV_F)
+    ends = (
+        [assign(EV_F, start), assign(EV_GF, EV_OLD[k]), assign(EV_B, end)]
+        if last
+        else [assign(EV_A, start), assign(EV_F, end), assign(EV_GF, EV_NEW[k])]
+    )
     return [
-        assign(EV_F, start), assign(EV_GF, EV_OLD[k]), assign(EV_B, end), assign(EV_IT, 0),
+        *ends, assign(EV_IT, 0),
         Loop((
             If(cmp(EV_IT, ">=", EV_ITERATIONS), (Break(),)),
             inc(EV_IT, 1),
-            assign(EV_M, EV_F + 0.5 * (EV_B - EV_F)),
-            If(not_(and_(cmp(EV_M, ">", EV_F), cmp(EV_M, "<", EV_B))), (Break(),)),
+            assign(EV_M, lo + 0.5 * (hi - lo)),
+            If(not_(and_(cmp(EV_M, ">", lo), cmp(EV_M, "<", hi))), (Break(),)),
             *_g_at(dense, at, EV_M),
             If(fn("finite", EV_G[k]), (assign(EV_F, EV_M), assign(EV_GF, EV_G[k])), (
-                assign(EV_B, EV_M),)),
-        )),
-    ]  # fmt: skip
-
-
-def _first_finite(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E) -> list[S]:
-    """_last_finite's mirror: ev_f, ev_gf := the first time within [start,
-    end] found where event k's g is finite (and g there), by bisection
-    between start (g not finite) and end (finite: ev_new[k]): where g turns
-    finite within a piece, a crossing after that is searched in [ev_f, end]."""
-    return [
-        assign(EV_A, start), assign(EV_F, end), assign(EV_GF, EV_NEW[k]), assign(EV_IT, 0),
-        Loop((
-            If(cmp(EV_IT, ">=", EV_ITERATIONS), (Break(),)),
-            inc(EV_IT, 1),
-            assign(EV_M, EV_A + 0.5 * (EV_F - EV_A)),
-            If(not_(and_(cmp(EV_M, ">", EV_A), cmp(EV_M, "<", EV_F))), (Break(),)),
-            *_g_at(dense, at, EV_M),
-            If(fn("finite", EV_G[k]), (assign(EV_F, EV_M), assign(EV_GF, EV_G[k])), (
-                assign(EV_A, EV_M),)),
+                assign(other, EV_M),)),
         )),
     ]  # fmt: skip
 
@@ -555,7 +546,7 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
     interpolant; g at its end is needed's); in each piece, each event whose
     g changed sign as its direction asks (_crossed), located (or whose g
     turned NaN or infinite there: a crossing before its last finite point,
-    _last_finite); the piece's crossings in time order into the log, up to the first terminal
+    _finite_edge); the piece's crossings in time order into the log, up to the first terminal
     one or a full log, where the step stops (ev_stop, ev_halt its code).
     base: the log's first row (LBASE over lanes: the lane's trajectory's)."""
     ne, k, j = Int(len(grid.events)), Var("ev_k"), Var("ev_j")
@@ -586,11 +577,11 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
                 assign(EV_T[k], Const("HUGE")),
                 If(_crossed(k, EV_NEW[k]), tuple(_search(dense, at, k, ta, tb, EV_NEW[k])), (
                     If(_turned_nan(k, EV_NEW[k]), (
-                        *_last_finite(dense, at, k, ta, tb),
+                        *_finite_edge(dense, at, k, ta, tb, last=True),
                         If(_crossed(k, EV_GF), tuple(_search(dense, at, k, ta, EV_F, EV_GF))),
                     ), (
                         If(_turned_finite(k, EV_NEW[k]), (
-                            *_first_finite(dense, at, k, ta, tb),
+                            *_finite_edge(dense, at, k, ta, tb, last=False),
                             If(_crossed_from(k, EV_GF, EV_NEW[k]), tuple(
                                 _search(dense, at, k, EV_F, tb, EV_NEW[k], EV_GF))),
                         )),
