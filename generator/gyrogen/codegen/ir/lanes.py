@@ -81,8 +81,8 @@ class LanesPrinter(CPrinter):
         return "L->" + name.replace(".", "_")
 
     def shared(self, name: str) -> bool:
-        """A value of the struct the same on every lane (intent "in"): the
-        output grid's times and rows."""
+        """A value of the struct the same on every lane (intent "in" or
+        "out"): the output grid's times and rows, the event log."""
         d = self.state.get(name)
         return d is not None and d.intent in ("in", "out")
 
