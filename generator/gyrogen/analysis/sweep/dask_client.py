@@ -33,6 +33,8 @@ def engine(
     import dask
     from distributed import Client, LocalCluster, Worker
 
+    _drop_unretrieved_timeouts()
+
     class Plain(Worker):  # its HTTP routes on 127.0.0.1, without bokeh's dashboard
         def __init__(self, *args: Any, **kwargs: Any) -> None:
             super().__init__(*args, **{**kwargs, "dashboard": False})
@@ -66,6 +68,27 @@ def engine(
             raise GyrogenError(f"--scheduler {scheduler}: the cluster has no workers")
         with _quiet_when_stopped():
             yield client, f"dask.distributed at {scheduler} ({n} worker threads)", n
+
+
+class _UnretrievedTimeout(logging.Filter):
+    """Drops asyncio's "Future (or Task) exception was never retrieved" for a
+    TimeoutError: on a loaded machine a connection or a close inside Dask
+    (tornado's with_timeout) may time out in a future nobody awaits, and
+    asyncio prints it to stderr when the future is collected, after the
+    sweep has written its output. No result of the sweep is ever read from
+    such a future (the sweep awaits each of its own), so it is noise."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        unretrieved = "exception was never retrieved" in str(record.msg).split("\n", 1)[0]
+        return not (unretrieved and isinstance(exc, TimeoutError))
+
+
+def _drop_unretrieved_timeouts() -> None:
+    """_UnretrievedTimeout on asyncio's logger, once per process."""
+    log = logging.getLogger("asyncio")
+    if not any(isinstance(f, _UnretrievedTimeout) for f in log.filters):
+        log.addFilter(_UnretrievedTimeout())
 
 
 @contextmanager
