@@ -152,8 +152,10 @@ def test_drawn_events_are_the_independent_locators(drawn: tuple, method: str) ->
     comp, scene, p, sol, expected, simple = drawn
     assert sum(simple) >= EVENTS // 3, "the draw left too few simple events to judge"
     x0, c = np.array(scene.initial_state()), comp.setup(p)
-    _, log, _, code = comp.integrate_events(method, x0, c, [0.0, T_END], rtol=1e-12, atol=1e-12)
-    assert code == 0
+    _, log, _, code = comp.integrate_events(method, x0, c, [0.0, T_END], rtol=1e-12, atol=1e-12,
+                                            capacity=100_000)  # fmt: skip
+    assert code == 0  # room for an event resting at 0 (a conserved quantity at its level),
+    # whose g on the interpolant changes sign with its error: rodas4 logs 12,000 such in 4 s
     times = np.linspace(0.0, T_END, 401)
     states, _, code = comp.integrate_grid(method, x0, c, times, rtol=1e-12, atol=1e-12)
     assert code == 0

@@ -1391,6 +1391,8 @@ struct WHEEL_SPINUP_ALIGNED lanes {
     long base[WHEEL_SPINUP_LANES];
     double ev_old[1][WHEEL_SPINUP_LANES];
     double ev_end[1][WHEEL_SPINUP_LANES];
+    double ev_rate[1][WHEEL_SPINUP_LANES];
+    double ev_dold[1][WHEEL_SPINUP_LANES];
     long nlog[WHEEL_SPINUP_LANES];
     long lbase[WHEEL_SPINUP_LANES];
     int code[WHEEL_SPINUP_LANES];
@@ -2265,6 +2267,8 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
     double ev_new[1];
     double ev_g[1];
     double ev_t[1];
+    double ev_seen[1];
+    double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -2277,12 +2281,15 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
     double ev_stop;
     double ev_ta;
     double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
-    int ev_j;
-    int ev_need[WHEEL_SPINUP_LANES] = {0};
+    int ev_last;
+    int ev_res;
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int ev_k, i, l;
     int need;
@@ -2469,15 +2476,6 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     L->ev_end[ev_k][l] = ev_g[ev_k];
                 }
-                ev_need[l] = L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l] ? 1 : 0;
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && L->ev_end[ev_k][l] >=
-                            0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
-                            L->ev_end[ev_k][l] <= 0.0) || ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX)
-                            && !(fabs(L->ev_end[ev_k][l]) <= DBL_MAX))) {
-                        ev_need[l] = 1;
-                    }
-                }
             }
         }
     }
@@ -2498,22 +2496,52 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
     need = 0;
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-        need |= ok[l] && ev_need[l] != 0;
+        need |= ok[l];
     }
     if (need) {
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            if (ok[l] && ev_need[l] != 0) {
+            if (ok[l]) {
                 ev_stop = L->t[l];
                 ev_halt = -1;
                 ev_ta = told[l];
-                ev_j = 0;
-                for (;;) {
-                    if (ev_j >= 1) {
-                        break;
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_seen[ev_k] = 0.0;
+                }
+                if (L->ev_dold[0][l] < 0.0) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = L->x[i][l] + (told[l] + ev_del - told[l]) / hs[l] *
+                                (L->dense[0][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
+                                * (L->dense[1][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
+                                (L->dense[2][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
+                                * L->dense[3][i][l])));
                     }
-                    ev_j = ev_j + 1;
-                    if (ev_j < 1) {
-                        ev_tb = told[l] + (L->t[l] - told[l]) * ((double)ev_j / 1.0);
+                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dold[ev_k][l];
+                    }
+                }
+                for (;;) {
+                    ev_tb = ev_ta + ev_dt;
+                    ev_last = 0;
+                    if (ev_tb >= L->t[l]) {
+                        ev_tb = L->t[l];
+                        ev_last = 1;
+                    }
+                    if (ev_last == 0) {
                         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
                                     + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
@@ -2525,10 +2553,39 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                             ev_new[ev_k] = ev_g[ev_k];
                         }
                     } else {
-                        ev_tb = L->t[l];
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = L->ev_end[ev_k][l];
                         }
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
+                                * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                (L->dense[2][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
+                                * L->dense[3][i][l])));
+                    }
+                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
+                    ev_res = 1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((L->ev_old[ev_k][l] < 0.0 &&
+                                ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k]
+                                < 0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) +
+                                fabs(ev_new[ev_k])) || (ev_tb - ev_ta) * L->ev_rate[ev_k][l] >
+                                ((L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] > 0.0) ||
+                                (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                                (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))) {
+                            ev_res = 0;
+                        }
+                    }
+                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05) {
+                        ev_dt = 0.5 * ev_dt;
+                        continue;
                     }
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_t[ev_k] = DBL_MAX;
@@ -2788,8 +2845,18 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                     }
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         L->ev_old[ev_k][l] = ev_new[ev_k];
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                    if (ev_last != 0) {
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            L->ev_rate[ev_k][l] = ev_seen[ev_k];
+                        }
+                        break;
                     }
                     ev_ta = ev_tb;
+                    if (ev_res != 0) {
+                        ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                    }
                 }
                 for (;;) {
                     if (!(L->g[l] < L->ntimes)) {
@@ -2831,12 +2898,6 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                     ok[l] = 0;
                 }
             }
-        }
-    }
-    for (ev_k = 0; ev_k < 1; ++ev_k) {
-        WHEEL_SPINUP_SIMD
-        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            L->ev_old[ev_k][l] = ok[l] && ev_need[l] == 0 ? L->ev_end[ev_k][l] : L->ev_old[ev_k][l];
         }
     }
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
@@ -3712,6 +3773,8 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
     double ev_new[1];
     double ev_g[1];
     double ev_t[1];
+    double ev_seen[1];
+    double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -3724,12 +3787,15 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
     double ev_stop;
     double ev_ta;
     double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
-    int ev_j;
-    int ev_need[WHEEL_SPINUP_LANES] = {0};
+    int ev_last;
+    int ev_res;
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int ev_k, i, l;
     int need;
@@ -4046,22 +4112,13 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     L->ev_end[ev_k][l] = ev_g[ev_k];
                 }
-                ev_need[l] = L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l] ? 1 : 0;
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && L->ev_end[ev_k][l] >=
-                            0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
-                            L->ev_end[ev_k][l] <= 0.0) || ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX)
-                            && !(fabs(L->ev_end[ev_k][l]) <= DBL_MAX))) {
-                        ev_need[l] = 1;
-                    }
-                }
             }
         }
     }
     need = 0;
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-        need |= ok[l] && ev_need[l] != 0;
+        need |= ok[l];
     }
     if (need) {
 
@@ -4114,8 +4171,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
         rhs_lanes(L->ts, L->y, c, L->k[15]);
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            L->stats_rhs_calls[l] = ok[l] && ev_need[l] != 0 ? L->stats_rhs_calls[l] + 3 :
-                    L->stats_rhs_calls[l];
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 3 : L->stats_rhs_calls[l];
         }
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             WHEEL_SPINUP_SIMD
@@ -4157,22 +4213,55 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
     need = 0;
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-        need |= ok[l] && ev_need[l] != 0;
+        need |= ok[l];
     }
     if (need) {
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            if (ok[l] && ev_need[l] != 0) {
+            if (ok[l]) {
                 ev_stop = L->t[l];
                 ev_halt = -1;
                 ev_ta = told[l];
-                ev_j = 0;
-                for (;;) {
-                    if (ev_j >= 1) {
-                        break;
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_seen[ev_k] = 0.0;
+                }
+                if (L->ev_dold[0][l] < 0.0) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = L->x[i][l] + (told[l] + ev_del - told[l]) / hs[l] *
+                                (L->dense[0][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
+                                * (L->dense[1][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
+                                (L->dense[2][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
+                                * (L->dense[3][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
+                                (L->dense[4][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
+                                * (L->dense[5][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
+                                L->dense[6][i][l]))))));
                     }
-                    ev_j = ev_j + 1;
-                    if (ev_j < 1) {
-                        ev_tb = told[l] + (L->t[l] - told[l]) * ((double)ev_j / 1.0);
+                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dold[ev_k][l];
+                    }
+                }
+                for (;;) {
+                    ev_tb = ev_ta + ev_dt;
+                    ev_last = 0;
+                    if (ev_tb >= L->t[l]) {
+                        ev_tb = L->t[l];
+                        ev_last = 1;
+                    }
+                    if (ev_last == 0) {
                         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
                                     + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
@@ -4187,10 +4276,42 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                             ev_new[ev_k] = ev_g[ev_k];
                         }
                     } else {
-                        ev_tb = L->t[l];
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = L->ev_end[ev_k][l];
                         }
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
+                                * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                (L->dense[2][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
+                                * (L->dense[3][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                (L->dense[4][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
+                                * (L->dense[5][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                L->dense[6][i][l]))))));
+                    }
+                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
+                    ev_res = 1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((L->ev_old[ev_k][l] < 0.0 &&
+                                ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k]
+                                < 0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) +
+                                fabs(ev_new[ev_k])) || (ev_tb - ev_ta) * L->ev_rate[ev_k][l] >
+                                ((L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] > 0.0) ||
+                                (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                                (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))) {
+                            ev_res = 0;
+                        }
+                    }
+                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05) {
+                        ev_dt = 0.5 * ev_dt;
+                        continue;
                     }
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_t[ev_k] = DBL_MAX;
@@ -4472,8 +4593,18 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                     }
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         L->ev_old[ev_k][l] = ev_new[ev_k];
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                    if (ev_last != 0) {
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            L->ev_rate[ev_k][l] = ev_seen[ev_k];
+                        }
+                        break;
                     }
                     ev_ta = ev_tb;
+                    if (ev_res != 0) {
+                        ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                    }
                 }
                 for (;;) {
                     if (!(L->g[l] < L->ntimes)) {
@@ -4519,12 +4650,6 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                     ok[l] = 0;
                 }
             }
-        }
-    }
-    for (ev_k = 0; ev_k < 1; ++ev_k) {
-        WHEEL_SPINUP_SIMD
-        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            L->ev_old[ev_k][l] = ok[l] && ev_need[l] == 0 ? L->ev_end[ev_k][l] : L->ev_old[ev_k][l];
         }
     }
     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
@@ -6170,7 +6295,7 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
         }
         L->g[l] = 1;
     }
-    if (L->nlogs) {  /* events: the log empty, g at the start (a crossing's first side) */
+    if (L->nlogs) {  /* events: the log empty, g at the start (a crossing's first side), no rate seen */
         double g0[1];
         L->nlog[l] = 0;
         L->lbase[l] = (long)traj * L->capacity;
@@ -6178,6 +6303,8 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
             wheel_spinup_events(t0, x, c, g0);
             for (i = 0; i < 1; ++i) {
                 L->ev_old[i][l] = g0[i];
+                L->ev_rate[i][l] = 0.0;
+                L->ev_dold[i][l] = -1.0;
             }
         }
     }
@@ -6855,6 +6982,10 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
     double ev_end[1];
     double ev_g[1];
     double ev_t[1];
+    double ev_rate[1];
+    double ev_dold[1];
+    double ev_seen[1];
+    double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -6867,12 +6998,15 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
     double ev_stop;
     double ev_ta;
     double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
-    int ev_j;
-    int ev_need;
+    int ev_last;
+    int ev_res;
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int ev_k;
     int i;
@@ -6893,6 +7027,10 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
         }
         g = 1;
         wheel_spinup_events(t0, x, c, ev_old);
+        for (ev_k = 0; ev_k < 1; ++ev_k) {
+            ev_rate[ev_k] = 0.0;
+            ev_dold[ev_k] = -1.0;
+        }
     }
     if (code >= 0) {
         return code;
@@ -7011,38 +7149,55 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
         if (ok) {
             wheel_spinup_events(t, xnew, c, ev_end);
-            ev_need = g < ntimes && times[g] < t ? 1 : 0;
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
-                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
-                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
-                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
-                    ev_need = 1;
-                }
-            }
-            if (ev_need != 0) {
 
-                /* the dense output of order 4 */
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    dense[0][i] = xnew[i] - x[i];
-                    dense[1][i] = hs * k[0][i] - dense[0][i];
-                    dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
-                    dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 *
-                            k[2][i] - 5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i]
-                            - 1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
-                }
+            /* the dense output of order 4 */
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                dense[0][i] = xnew[i] - x[i];
+                dense[1][i] = hs * k[0][i] - dense[0][i];
+                dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
+                dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 * k[2][i] -
+                        5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i] -
+                        1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
             }
             ev_stop = t;
             ev_halt = -1;
             ev_ta = told;
-            ev_j = 0;
-            for (;;) {
-                if (ev_j >= 1) {
-                    break;
+            ev_cap = (t - told) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = (t - told) * 1.52587890625e-05;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_seen[ev_k] = 0.0;
+            }
+            if (ev_dold[0] < 0.0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] + (told + ev_del - told) / hs * (dense[0][i] + (1.0 - (told +
+                            ev_del - told) / hs) * (dense[1][i] + (told + ev_del - told) / hs *
+                            (dense[2][i] + (1.0 - (told + ev_del - told) / hs) * dense[3][i])));
                 }
-                ev_j = ev_j + 1;
-                if (ev_j < 1) {
-                    ev_tb = told + (t - told) * ((double)ev_j / 1.0);
+                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if (ev_dold[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dold[ev_k];
+                }
+            }
+            for (;;) {
+                ev_tb = ev_ta + ev_dt;
+                ev_last = 0;
+                if (ev_tb >= t) {
+                    ev_tb = t;
+                    ev_last = 1;
+                }
+                if (ev_last == 0) {
                     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                         ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
                                 told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
@@ -7053,10 +7208,37 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                         ev_new[ev_k] = ev_g[ev_k];
                     }
                 } else {
-                    ev_tb = t;
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
                     }
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 - (ev_tb
+                            + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del - told) /
+                            hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) / hs) *
+                            dense[3][i])));
+                }
+                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                ev_res = 1;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] >
+                            0.0) || (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k])) || (ev_tb - ev_ta) *
+                            ev_rate[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0) ||
+                            (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k]))) {
+                        ev_res = 0;
+                    }
+                }
+                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05) {
+                    ev_dt = 0.5 * ev_dt;
+                    continue;
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_t[ev_k] = DBL_MAX;
@@ -7301,8 +7483,18 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_old[ev_k] = ev_new[ev_k];
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+                if (ev_last != 0) {
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_rate[ev_k] = ev_seen[ev_k];
+                    }
+                    break;
                 }
                 ev_ta = ev_tb;
+                if (ev_res != 0) {
+                    ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                }
             }
             for (;;) {
                 if (!(g < ntimes)) {
@@ -8084,6 +8276,10 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
     double ev_end[1];
     double ev_g[1];
     double ev_t[1];
+    double ev_rate[1];
+    double ev_dold[1];
+    double ev_seen[1];
+    double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -8096,12 +8292,15 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
     double ev_stop;
     double ev_ta;
     double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
-    int ev_j;
-    int ev_need;
+    int ev_last;
+    int ev_res;
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int ev_k;
     int i;
@@ -8122,6 +8321,10 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
         }
         g = 1;
         wheel_spinup_events(t0, x, c, ev_old);
+        for (ev_k = 0; ev_k < 1; ++ev_k) {
+            ev_rate[ev_k] = 0.0;
+            ev_dold[ev_k] = -1.0;
+        }
     }
     if (code >= 0) {
         return code;
@@ -8308,82 +8511,101 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
         if (ok) {
             wheel_spinup_events(t, xnew, c, ev_end);
-            ev_need = g < ntimes && times[g] < t ? 1 : 0;
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
-                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
-                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
-                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
-                    ev_need = 1;
-                }
-            }
-            if (ev_need != 0) {
 
-                /* the dense output of order 7 */
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
-                            k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 *
-                            k[8][i] + 0.15329179827876568 * k[9][i] + 0.00820105229563469 *
-                            k[10][i] + 0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
-                }
-                wheel_spinup_rhs(told + 0.1 * hs, y, c, k[13]);
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
-                            k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 *
-                            k[7][i] - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 *
-                            k[11][i] - 0.00034046500868740456 * k[12][i] + 0.1413124436746325 *
-                            k[13][i]);
-                }
-                wheel_spinup_rhs(told + 0.2 * hs, y, c, k[14]);
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 *
-                            k[5][i] + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
-                            0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
-                            2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
-                }
-                wheel_spinup_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
-                stats->rhs_calls = stats->rhs_calls + 3;
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    dense[0][i] = xnew[i] - x[i];
-                    dense[1][i] = hs * k[0][i] - dense[0][i];
-                    dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
-                    dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 *
-                            k[5][i] - 3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
-                            2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
-                            2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
-                            0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
-                            9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
-                    dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 *
-                            k[5][i] + 165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i]
-                            - 22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
-                            30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
-                            15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
-                            9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
-                    dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 *
-                            k[5][i] - 189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i]
-                            - 11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
-                            1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
-                            2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
-                            84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
-                    dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 *
-                            k[5][i] - 231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
-                            93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
-                            104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
-                            43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
-                            39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
-                }
+            /* the dense output of order 7 */
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
+                        k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 * k[8][i] +
+                        0.15329179827876568 * k[9][i] + 0.00820105229563469 * k[10][i] +
+                        0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
+            }
+            wheel_spinup_rhs(told + 0.1 * hs, y, c, k[13]);
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
+                        k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 * k[7][i]
+                        - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 * k[11][i] -
+                        0.00034046500868740456 * k[12][i] + 0.1413124436746325 * k[13][i]);
+            }
+            wheel_spinup_rhs(told + 0.2 * hs, y, c, k[14]);
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 * k[5][i]
+                        + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
+                        0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
+                        2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
+            }
+            wheel_spinup_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
+            stats->rhs_calls = stats->rhs_calls + 3;
+            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                dense[0][i] = xnew[i] - x[i];
+                dense[1][i] = hs * k[0][i] - dense[0][i];
+                dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
+                dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 * k[5][i] -
+                        3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
+                        2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
+                        2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
+                        0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
+                        9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
+                dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 * k[5][i] +
+                        165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i] -
+                        22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
+                        30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
+                        15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
+                        9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
+                dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 * k[5][i] -
+                        189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i] -
+                        11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
+                        1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
+                        2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
+                        84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
+                dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 * k[5][i] -
+                        231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
+                        93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
+                        104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
+                        43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
+                        39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
             }
             ev_stop = t;
             ev_halt = -1;
             ev_ta = told;
-            ev_j = 0;
-            for (;;) {
-                if (ev_j >= 1) {
-                    break;
+            ev_cap = (t - told) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = (t - told) * 1.52587890625e-05;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_seen[ev_k] = 0.0;
+            }
+            if (ev_dold[0] < 0.0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] + (told + ev_del - told) / hs * (dense[0][i] + (1.0 - (told +
+                            ev_del - told) / hs) * (dense[1][i] + (told + ev_del - told) / hs *
+                            (dense[2][i] + (1.0 - (told + ev_del - told) / hs) * (dense[3][i] +
+                            (told + ev_del - told) / hs * (dense[4][i] + (1.0 - (told + ev_del -
+                            told) / hs) * (dense[5][i] + (told + ev_del - told) / hs *
+                            dense[6][i]))))));
                 }
-                ev_j = ev_j + 1;
-                if (ev_j < 1) {
-                    ev_tb = told + (t - told) * ((double)ev_j / 1.0);
+                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if (ev_dold[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dold[ev_k];
+                }
+            }
+            for (;;) {
+                ev_tb = ev_ta + ev_dt;
+                ev_last = 0;
+                if (ev_tb >= t) {
+                    ev_tb = t;
+                    ev_last = 1;
+                }
+                if (ev_last == 0) {
                     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                         ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
                                 told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
@@ -8396,10 +8618,39 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                         ev_new[ev_k] = ev_g[ev_k];
                     }
                 } else {
-                    ev_tb = t;
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
                     }
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 - (ev_tb
+                            + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del - told) /
+                            hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) / hs) *
+                            (dense[3][i] + (ev_tb + -ev_del - told) / hs * (dense[4][i] + (1.0 -
+                            (ev_tb + -ev_del - told) / hs) * (dense[5][i] + (ev_tb + -ev_del -
+                            told) / hs * dense[6][i]))))));
+                }
+                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                ev_res = 1;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] >
+                            0.0) || (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k])) || (ev_tb - ev_ta) *
+                            ev_rate[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0) ||
+                            (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k]))) {
+                        ev_res = 0;
+                    }
+                }
+                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05) {
+                    ev_dt = 0.5 * ev_dt;
+                    continue;
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_t[ev_k] = DBL_MAX;
@@ -8660,8 +8911,18 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_old[ev_k] = ev_new[ev_k];
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+                if (ev_last != 0) {
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_rate[ev_k] = ev_seen[ev_k];
+                    }
+                    break;
                 }
                 ev_ta = ev_tb;
+                if (ev_res != 0) {
+                    ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                }
             }
             for (;;) {
                 if (!(g < ntimes)) {
@@ -9373,6 +9634,10 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
     double ev_end[1];
     double ev_g[1];
     double ev_t[1];
+    double ev_rate[1];
+    double ev_dold[1];
+    double ev_seen[1];
+    double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -9385,12 +9650,15 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
     double ev_stop;
     double ev_ta;
     double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
-    int ev_j;
-    int ev_need;
+    int ev_last;
+    int ev_res;
     int ev_k;
     int i;
 
@@ -9410,6 +9678,10 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
         }
         g = 1;
         wheel_spinup_events(t0, x, c, ev_old);
+        for (ev_k = 0; ev_k < 1; ++ev_k) {
+            ev_rate[ev_k] = 0.0;
+            ev_dold[ev_k] = -1.0;
+        }
     }
     if (start >= 0) {
         return start;
@@ -9485,28 +9757,45 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
             h_acc = h;
             err_acc = dmax(1e-2, err);
             wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);
-            ev_need = g < ntimes && times[g] < (last ? t1 : t + h) ? 1 : 0;
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
-                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
-                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
-                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
-                    ev_need = 1;
-                }
-            }
-            if (ev_need != 0) {
-            }
             ev_stop = last ? t1 : t + h;
             ev_halt = -1;
             ev_ta = t;
-            ev_j = 0;
-            for (;;) {
-                if (ev_j >= 1) {
-                    break;
+            ev_cap = ((last ? t1 : t + h) - t) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_seen[ev_k] = 0.0;
+            }
+            if (ev_dold[0] < 0.0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] * (1.0 - (t + ev_del - t) / h) + (t + ev_del - t) / h *
+                            (xnew[i] + (1.0 - (t + ev_del - t) / h) * (dense[0][i] + (t + ev_del
+                            - t) / h * dense[1][i]));
                 }
-                ev_j = ev_j + 1;
-                if (ev_j < 1) {
-                    ev_tb = t + ((last ? t1 : t + h) - t) * ((double)ev_j / 1.0);
+                wheel_spinup_events(t + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if (ev_dold[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dold[ev_k];
+                }
+            }
+            for (;;) {
+                ev_tb = ev_ta + ev_dt;
+                ev_last = 0;
+                if (ev_tb >= (last ? t1 : t + h)) {
+                    ev_tb = last ? t1 : t + h;
+                    ev_last = 1;
+                }
+                if (ev_last == 0) {
                     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                         ev_y[i] = x[i] * (1.0 - (ev_tb - t) / h) + (ev_tb - t) / h * (xnew[i] +
                                 (1.0 - (ev_tb - t) / h) * (dense[0][i] + (ev_tb - t) / h *
@@ -9517,10 +9806,36 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                         ev_new[ev_k] = ev_g[ev_k];
                     }
                 } else {
-                    ev_tb = last ? t1 : t + h;
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
                     }
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = x[i] * (1.0 - (ev_tb + -ev_del - t) / h) + (ev_tb + -ev_del - t) /
+                            h * (xnew[i] + (1.0 - (ev_tb + -ev_del - t) / h) * (dense[0][i] +
+                            (ev_tb + -ev_del - t) / h * dense[1][i]));
+                }
+                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                ev_res = 1;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] >
+                            0.0) || (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k])) || (ev_tb - ev_ta) *
+                            ev_rate[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0) ||
+                            (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k]))) {
+                        ev_res = 0;
+                    }
+                }
+                if (ev_res == 0 && ev_dt > ((last ? t1 : t + h) - t) * 1.52587890625e-05) {
+                    ev_dt = 0.5 * ev_dt;
+                    continue;
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_t[ev_k] = DBL_MAX;
@@ -9760,8 +10075,18 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_old[ev_k] = ev_new[ev_k];
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+                if (ev_last != 0) {
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_rate[ev_k] = ev_seen[ev_k];
+                    }
+                    break;
                 }
                 ev_ta = ev_tb;
+                if (ev_res != 0) {
+                    ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                }
             }
             for (;;) {
                 if (!(g < ntimes)) {
@@ -10858,6 +11183,10 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
     double ev_end[1];
     double ev_g[1];
     double ev_t[1];
+    double ev_rate[1];
+    double ev_dold[1];
+    double ev_seen[1];
+    double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -10870,12 +11199,15 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
     double ev_stop;
     double ev_ta;
     double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
-    int ev_j;
-    int ev_need;
+    int ev_last;
+    int ev_res;
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
     int ev_k;
     int i;
@@ -10897,6 +11229,10 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
         }
         g = 1;
         wheel_spinup_events(t0, x, c, ev_old);
+        for (ev_k = 0; ev_k < 1; ++ev_k) {
+            ev_rate[ev_k] = 0.0;
+            ev_dold[ev_k] = -1.0;
+        }
     }
     if (start >= 0) {
         return start;
@@ -11118,28 +11454,46 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                 ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
             }
             wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);
-            ev_need = g < ntimes && times[g] < (last ? t1 : t + h) ? 1 : 0;
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
-                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
-                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
-                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
-                    ev_need = 1;
-                }
-            }
-            if (ev_need != 0) {
-            }
             ev_stop = last ? t1 : t + h;
             ev_halt = -1;
             ev_ta = t;
-            ev_j = 0;
-            for (;;) {
-                if (ev_j >= 1) {
-                    break;
+            ev_cap = ((last ? t1 : t + h) - t) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_seen[ev_k] = 0.0;
+            }
+            if (ev_dold[0] < 0.0) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = xnew[i] + (t + ev_del - (last ? t1 : t + h)) / h * (ak1[i] + ((t +
+                            ev_del - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
+                            ((t + ev_del - (last ? t1 : t + h)) / h + 0.8449489742783178) *
+                            ak3[i]));
                 }
-                ev_j = ev_j + 1;
-                if (ev_j < 1) {
-                    ev_tb = t + ((last ? t1 : t + h) - t) * ((double)ev_j / 1.0);
+                wheel_spinup_events(t + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if (ev_dold[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dold[ev_k];
+                }
+            }
+            for (;;) {
+                ev_tb = ev_ta + ev_dt;
+                ev_last = 0;
+                if (ev_tb >= (last ? t1 : t + h)) {
+                    ev_tb = last ? t1 : t + h;
+                    ev_last = 1;
+                }
+                if (ev_last == 0) {
                     for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
                         ev_y[i] = xnew[i] + (ev_tb - (last ? t1 : t + h)) / h * (ak1[i] + ((ev_tb
                                 - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
@@ -11150,10 +11504,37 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                         ev_new[ev_k] = ev_g[ev_k];
                     }
                 } else {
-                    ev_tb = last ? t1 : t + h;
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
                     }
+                }
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = xnew[i] + (ev_tb + -ev_del - (last ? t1 : t + h)) / h * (ak1[i] +
+                            ((ev_tb + -ev_del - (last ? t1 : t + h)) / h + 0.35505102572168223) *
+                            (ak2[i] + ((ev_tb + -ev_del - (last ? t1 : t + h)) / h +
+                            0.8449489742783178) * ak3[i]));
+                }
+                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                ev_res = 1;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] >
+                            0.0) || (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k])) || (ev_tb - ev_ta) *
+                            ev_rate[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0) ||
+                            (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k]))) {
+                        ev_res = 0;
+                    }
+                }
+                if (ev_res == 0 && ev_dt > ((last ? t1 : t + h) - t) * 1.52587890625e-05) {
+                    ev_dt = 0.5 * ev_dt;
+                    continue;
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_t[ev_k] = DBL_MAX;
@@ -11400,8 +11781,18 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_old[ev_k] = ev_new[ev_k];
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+                if (ev_last != 0) {
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_rate[ev_k] = ev_seen[ev_k];
+                    }
+                    break;
                 }
                 ev_ta = ev_tb;
+                if (ev_res != 0) {
+                    ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                }
             }
             for (;;) {
                 if (!(g < ntimes)) {
@@ -12671,6 +13062,10 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
     double ev_end[1];
     double ev_g[1];
     double ev_t[1];
+    double ev_rate[1];
+    double ev_dold[1];
+    double ev_seen[1];
+    double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -12683,12 +13078,15 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
     double ev_stop;
     double ev_ta;
     double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
-    int ev_j;
-    int ev_need;
+    int ev_last;
+    int ev_res;
     int ev_k;
     int i;
     int j;
@@ -12711,6 +13109,10 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
         }
         g = 1;
         wheel_spinup_events(t0, x, c, ev_old);
+        for (ev_k = 0; ev_k < 1; ++ev_k) {
+            ev_rate[ev_k] = 0.0;
+            ev_dold[ev_k] = -1.0;
+        }
     }
     if (code >= 0) {
         return code;
@@ -13054,28 +13456,52 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
         cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
         if (ok) {
             wheel_spinup_events(t, xnew, c, ev_end);
-            ev_need = g < ntimes && times[g] < t ? 1 : 0;
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
-                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
-                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
-                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
-                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
-                    ev_need = 1;
-                }
-            }
-            if (ev_need != 0) {
-            }
             ev_stop = t;
             ev_halt = -1;
             ev_ta = told;
-            ev_j = 0;
-            for (;;) {
-                if (ev_j >= 1) {
-                    break;
+            ev_cap = (t - told) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = (t - told) * 1.52587890625e-05;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_seen[ev_k] = 0.0;
+            }
+            if (ev_dold[0] < 0.0) {
+                for (i = 0; i < 7; ++i) {
+                    acc[i] = tay[order][i];
                 }
-                ev_j = ev_j + 1;
-                if (ev_j < 1) {
-                    ev_tb = told + (t - told) * ((double)ev_j / 1.0);
+                for (q = 0; q < order - 1; ++q) {
+                    for (i = 0; i < 7; ++i) {
+                        acc[i] = tay[order - 1 - q][i] + (told + ev_del - told) * acc[i];
+                    }
+                }
+                for (i = 0; i < 7; ++i) {
+                    ev_y[i] = x[i] + (told + ev_del - told) * acc[i];
+                }
+                ev_y[7] = x[7] + (told + ev_del - told) * tay[1][7];
+                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if (ev_dold[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dold[ev_k];
+                }
+            }
+            for (;;) {
+                ev_tb = ev_ta + ev_dt;
+                ev_last = 0;
+                if (ev_tb >= t) {
+                    ev_tb = t;
+                    ev_last = 1;
+                }
+                if (ev_last == 0) {
                     for (i = 0; i < 7; ++i) {
                         acc[i] = tay[order][i];
                     }
@@ -13093,10 +13519,43 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                         ev_new[ev_k] = ev_g[ev_k];
                     }
                 } else {
-                    ev_tb = t;
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
                     }
+                }
+                for (i = 0; i < 7; ++i) {
+                    acc[i] = tay[order][i];
+                }
+                for (q = 0; q < order - 1; ++q) {
+                    for (i = 0; i < 7; ++i) {
+                        acc[i] = tay[order - 1 - q][i] + (ev_tb + -ev_del - told) * acc[i];
+                    }
+                }
+                for (i = 0; i < 7; ++i) {
+                    ev_y[i] = x[i] + (ev_tb + -ev_del - told) * acc[i];
+                }
+                ev_y[7] = x[7] + (ev_tb + -ev_del - told) * tay[1][7];
+                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = ev_dnew[ev_k];
+                    }
+                }
+                ev_res = 1;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] >
+                            0.0) || (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k])) || (ev_tb - ev_ta) *
+                            ev_rate[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0) ||
+                            (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                            (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k]))) {
+                        ev_res = 0;
+                    }
+                }
+                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05) {
+                    ev_dt = 0.5 * ev_dt;
+                    continue;
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_t[ev_k] = DBL_MAX;
@@ -13379,8 +13838,18 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_old[ev_k] = ev_new[ev_k];
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+                if (ev_last != 0) {
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_rate[ev_k] = ev_seen[ev_k];
+                    }
+                    break;
                 }
                 ev_ta = ev_tb;
+                if (ev_res != 0) {
+                    ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                }
             }
             for (;;) {
                 if (!(g < ntimes)) {

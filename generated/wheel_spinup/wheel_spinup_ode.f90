@@ -1936,6 +1936,10 @@ contains
     real(c_double) :: ev_end(0:0)
     real(c_double) :: ev_g(0:0)
     real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_rate(0:0)
+    real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_seen(0:0)
+    real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
     real(c_double) :: ev_a
     real(c_double) :: ev_b
@@ -1948,12 +1952,15 @@ contains
     real(c_double) :: ev_stop
     real(c_double) :: ev_ta
     real(c_double) :: ev_tb
+    real(c_double) :: ev_dt
+    real(c_double) :: ev_del
+    real(c_double) :: ev_cap
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
     integer(c_int) :: ev_it
-    integer(c_int) :: ev_j
-    integer(c_int) :: ev_need
+    integer(c_int) :: ev_last
+    integer(c_int) :: ev_res
     real(c_double), parameter :: is_angle(0:7) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
         1.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: e
@@ -1977,6 +1984,10 @@ contains
       end do
       g = 1
       call wheel_spinup_events(t0, x, c, ev_old)
+      do ev_k = 0, 1 - 1
+        ev_rate(ev_k) = 0.0_c_double
+        ev_dold(ev_k) = -1.0_c_double
+      end do
     end if
     if (code >= 0) then
       res = code
@@ -2101,40 +2112,57 @@ contains
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
         call wheel_spinup_events(t, xnew, c, ev_end)
-        ev_need = merge(1, 0, g < ntimes .and. times(g) < t)
-        do ev_k = 0, 1 - 1
-          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
-              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
-              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
-              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
-              ieee_is_finite(ev_end(ev_k)))) then
-            ev_need = 1
-          end if
-        end do
-        if (ev_need /= 0) then
 
-          ! the dense output of order 4
-          do i = 0, nx - 1
-            dense(i, 0) = xnew(i) - x(i)
-            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
-            dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
-            dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
-                0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
-                3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
-                5)) + 2.382468931778144_c_double * k(i, 6))
-          end do
-        end if
+        ! the dense output of order 4
+        do i = 0, nx - 1
+          dense(i, 0) = xnew(i) - x(i)
+          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+          dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
+          dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
+              0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
+              3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
+              5)) + 2.382468931778144_c_double * k(i, 6))
+        end do
         ev_stop = t
         ev_halt = -1
         ev_ta = told
-        ev_j = 0
-        do
-          if (ev_j >= 1) then
-            exit
+        ev_cap = (t - told) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = (t - told) * 1.52587890625e-05_c_double
+        do ev_k = 0, 1 - 1
+          ev_seen(ev_k) = 0.0_c_double
+        end do
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 0, nx - 1
+            ev_y(i) = x(i) + (((told + ev_del) - told) / hs) * (dense(i, &
+                0) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
+                1) + (((told + ev_del) - told) / hs) * (dense(i, &
+                2) + (1.0_c_double - ((told + ev_del) - told) / hs) * dense(i, 3))))
+          end do
+          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do ev_k = 0, 1 - 1
+          if (ev_dold(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dold(ev_k)
           end if
-          ev_j = ev_j + 1
-          if (ev_j < 1) then
-            ev_tb = told + (t - told) * (real(ev_j, c_double) / 1.0_c_double)
+        end do
+        do
+          ev_tb = ev_ta + ev_dt
+          ev_last = 0
+          if (ev_tb >= t) then
+            ev_tb = t
+            ev_last = 1
+          end if
+          if (ev_last == 0) then
             do i = 0, nx - 1
               ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
@@ -2146,10 +2174,39 @@ contains
               ev_new(ev_k) = ev_g(ev_k)
             end do
           else
-            ev_tb = t
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
             end do
+          end if
+          do i = 0, nx - 1
+            ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                2) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * dense(i, 3))))
+          end do
+          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          ev_res = 1
+          do ev_k = 0, 1 - 1
+            if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k))) .or. (ev_tb - ev_ta) * ev_rate(ev_k) > &
+                (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k)))) then
+              ev_res = 0
+            end if
+          end do
+          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double) then
+            ev_dt = 0.5_c_double * ev_dt
+            cycle
           end if
           do ev_k = 0, 1 - 1
             ev_t(ev_k) = huge(1.0_c_double)
@@ -2398,8 +2455,18 @@ contains
           end if
           do ev_k = 0, 1 - 1
             ev_old(ev_k) = ev_new(ev_k)
+            ev_dold(ev_k) = ev_dnew(ev_k)
           end do
+          if (ev_last /= 0) then
+            do ev_k = 0, 1 - 1
+              ev_rate(ev_k) = ev_seen(ev_k)
+            end do
+            exit
+          end if
           ev_ta = ev_tb
+          if (ev_res /= 0) then
+            ev_dt = min(2.0_c_double * ev_dt, ev_cap)
+          end if
         end do
         do
           if (.not. (g < ntimes)) then
@@ -3299,6 +3366,10 @@ contains
     real(c_double) :: ev_end(0:0)
     real(c_double) :: ev_g(0:0)
     real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_rate(0:0)
+    real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_seen(0:0)
+    real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
     real(c_double) :: ev_a
     real(c_double) :: ev_b
@@ -3311,12 +3382,15 @@ contains
     real(c_double) :: ev_stop
     real(c_double) :: ev_ta
     real(c_double) :: ev_tb
+    real(c_double) :: ev_dt
+    real(c_double) :: ev_del
+    real(c_double) :: ev_cap
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
     integer(c_int) :: ev_it
-    integer(c_int) :: ev_j
-    integer(c_int) :: ev_need
+    integer(c_int) :: ev_last
+    integer(c_int) :: ev_res
     real(c_double), parameter :: is_angle(0:7) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
         1.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: e3
@@ -3341,6 +3415,10 @@ contains
       end do
       g = 1
       call wheel_spinup_events(t0, x, c, ev_old)
+      do ev_k = 0, 1 - 1
+        ev_rate(ev_k) = 0.0_c_double
+        ev_dold(ev_k) = -1.0_c_double
+      end do
     end if
     if (code >= 0) then
       res = code
@@ -3536,98 +3614,113 @@ contains
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
         call wheel_spinup_events(t, xnew, c, ev_end)
-        ev_need = merge(1, 0, g < ntimes .and. times(g) < t)
-        do ev_k = 0, 1 - 1
-          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
-              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
-              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
-              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
-              ieee_is_finite(ev_end(ev_k)))) then
-            ev_need = 1
-          end if
-        end do
-        if (ev_need /= 0) then
 
-          ! the dense output of order 7
-          do i = 0, nx - 1
-            y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
-                0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
-                7)) - 0.12419142326381637_c_double * k(i, &
-                8)) + 0.15329179827876568_c_double * k(i, &
-                9)) + 0.00820105229563469_c_double * k(i, &
-                10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
-          end do
-          call wheel_spinup_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
-          do i = 0, nx - 1
-            y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
-                0) + 0.028300909672366776_c_double * k(i, &
-                5)) + 0.053541988307438566_c_double * k(i, &
-                6)) - 0.05492374857139099_c_double * k(i, &
-                7)) - 0.00010834732869724932_c_double * k(i, &
-                10)) + 0.0003825710908356584_c_double * k(i, &
-                11)) - 0.00034046500868740456_c_double * k(i, &
-                12)) + 0.1413124436746325_c_double * k(i, 13))
-          end do
-          call wheel_spinup_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
-          do i = 0, nx - 1
-            y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
-                0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
-                6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
-                8)) - 0.0013990241651590145_c_double * k(i, &
-                12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, &
-                14))
-          end do
-          call wheel_spinup_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
-          stats%rhs_calls = stats%rhs_calls + 3
-          do i = 0, nx - 1
-            dense(i, 0) = xnew(i) - x(i)
-            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
-            dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
-            dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
-                0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
-                6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
-                8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
-                10)) + 0.6315787787694688_c_double * k(i, &
-                11)) - 0.08899033645133331_c_double * k(i, &
-                12)) + 18.148505520854727_c_double * k(i, &
-                13)) - 9.194632392478356_c_double * k(i, 14)) - 4.436036387594894_c_double * k(i, &
-                15))
-            dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
-                0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
-                6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
-                8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
-                10)) - 9.332130526430229_c_double * k(i, &
-                11)) + 15.697238121770845_c_double * k(i, &
-                12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
-                14)) + 35.81684148639408_c_double * k(i, 15))
-            dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
-                0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
-                6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
-                8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
-                10)) + 0.7777137798053443_c_double * k(i, &
-                11)) - 2.778205752353508_c_double * k(i, 12)) - 60.19669523126412_c_double * k(i, &
-                13)) + 84.32040550667716_c_double * k(i, 14)) + 11.99229113618279_c_double * k(i, &
-                15))
-            dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
-                0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
-                6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
-                8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
-                10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
-                12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
-                14)) - 149.72683625798564_c_double * k(i, 15))
-          end do
-        end if
+        ! the dense output of order 7
+        do i = 0, nx - 1
+          y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
+              0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
+              7)) - 0.12419142326381637_c_double * k(i, 8)) + 0.15329179827876568_c_double * k(i, &
+              9)) + 0.00820105229563469_c_double * k(i, &
+              10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
+        end do
+        call wheel_spinup_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
+        do i = 0, nx - 1
+          y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
+              0) + 0.028300909672366776_c_double * k(i, &
+              5)) + 0.053541988307438566_c_double * k(i, &
+              6)) - 0.05492374857139099_c_double * k(i, &
+              7)) - 0.00010834732869724932_c_double * k(i, &
+              10)) + 0.0003825710908356584_c_double * k(i, &
+              11)) - 0.00034046500868740456_c_double * k(i, &
+              12)) + 0.1413124436746325_c_double * k(i, 13))
+        end do
+        call wheel_spinup_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
+        do i = 0, nx - 1
+          y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
+              0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
+              6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
+              8)) - 0.0013990241651590145_c_double * k(i, &
+              12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, 14))
+        end do
+        call wheel_spinup_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
+        stats%rhs_calls = stats%rhs_calls + 3
+        do i = 0, nx - 1
+          dense(i, 0) = xnew(i) - x(i)
+          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+          dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
+          dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
+              0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
+              6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
+              8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
+              10)) + 0.6315787787694688_c_double * k(i, &
+              11)) - 0.08899033645133331_c_double * k(i, &
+              12)) + 18.148505520854727_c_double * k(i, 13)) - 9.194632392478356_c_double * k(i, &
+              14)) - 4.436036387594894_c_double * k(i, 15))
+          dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
+              0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
+              6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
+              8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
+              10)) - 9.332130526430229_c_double * k(i, 11)) + 15.697238121770845_c_double * k(i, &
+              12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
+              14)) + 35.81684148639408_c_double * k(i, 15))
+          dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
+              0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
+              6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
+              8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
+              10)) + 0.7777137798053443_c_double * k(i, 11)) - 2.778205752353508_c_double * k(i, &
+              12)) - 60.19669523126412_c_double * k(i, 13)) + 84.32040550667716_c_double * k(i, &
+              14)) + 11.99229113618279_c_double * k(i, 15))
+          dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
+              0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
+              6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
+              8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
+              10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
+              12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
+              14)) - 149.72683625798564_c_double * k(i, 15))
+        end do
         ev_stop = t
         ev_halt = -1
         ev_ta = told
-        ev_j = 0
-        do
-          if (ev_j >= 1) then
-            exit
+        ev_cap = (t - told) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = (t - told) * 1.52587890625e-05_c_double
+        do ev_k = 0, 1 - 1
+          ev_seen(ev_k) = 0.0_c_double
+        end do
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 0, nx - 1
+            ev_y(i) = x(i) + (((told + ev_del) - told) / hs) * (dense(i, &
+                0) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
+                1) + (((told + ev_del) - told) / hs) * (dense(i, &
+                2) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
+                3) + (((told + ev_del) - told) / hs) * (dense(i, &
+                4) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
+                5) + (((told + ev_del) - told) / hs) * dense(i, 6)))))))
+          end do
+          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do ev_k = 0, 1 - 1
+          if (ev_dold(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dold(ev_k)
           end if
-          ev_j = ev_j + 1
-          if (ev_j < 1) then
-            ev_tb = told + (t - told) * (real(ev_j, c_double) / 1.0_c_double)
+        end do
+        do
+          ev_tb = ev_ta + ev_dt
+          ev_last = 0
+          if (ev_tb >= t) then
+            ev_tb = t
+            ev_last = 1
+          end if
+          if (ev_last == 0) then
             do i = 0, nx - 1
               ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
@@ -3642,10 +3735,42 @@ contains
               ev_new(ev_k) = ev_g(ev_k)
             end do
           else
-            ev_tb = t
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
             end do
+          end if
+          do i = 0, nx - 1
+            ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                2) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                3) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                4) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                5) + (((ev_tb + (-ev_del)) - told) / hs) * dense(i, 6)))))))
+          end do
+          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          ev_res = 1
+          do ev_k = 0, 1 - 1
+            if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k))) .or. (ev_tb - ev_ta) * ev_rate(ev_k) > &
+                (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k)))) then
+              ev_res = 0
+            end if
+          end do
+          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double) then
+            ev_dt = 0.5_c_double * ev_dt
+            cycle
           end if
           do ev_k = 0, 1 - 1
             ev_t(ev_k) = huge(1.0_c_double)
@@ -3912,8 +4037,18 @@ contains
           end if
           do ev_k = 0, 1 - 1
             ev_old(ev_k) = ev_new(ev_k)
+            ev_dold(ev_k) = ev_dnew(ev_k)
           end do
+          if (ev_last /= 0) then
+            do ev_k = 0, 1 - 1
+              ev_rate(ev_k) = ev_seen(ev_k)
+            end do
+            exit
+          end if
           ev_ta = ev_tb
+          if (ev_res /= 0) then
+            ev_dt = min(2.0_c_double * ev_dt, ev_cap)
+          end if
         end do
         do
           if (.not. (g < ntimes)) then
@@ -4751,6 +4886,10 @@ contains
     real(c_double) :: ev_end(0:0)
     real(c_double) :: ev_g(0:0)
     real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_rate(0:0)
+    real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_seen(0:0)
+    real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
     real(c_double) :: ev_a
     real(c_double) :: ev_b
@@ -4763,12 +4902,15 @@ contains
     real(c_double) :: ev_stop
     real(c_double) :: ev_ta
     real(c_double) :: ev_tb
+    real(c_double) :: ev_dt
+    real(c_double) :: ev_del
+    real(c_double) :: ev_cap
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
     integer(c_int) :: ev_it
-    integer(c_int) :: ev_j
-    integer(c_int) :: ev_need
+    integer(c_int) :: ev_last
+    integer(c_int) :: ev_res
     integer(c_int) :: ev_k
     integer(c_int) :: i
 
@@ -4789,6 +4931,10 @@ contains
       end do
       g = 1
       call wheel_spinup_events(t0, x, c, ev_old)
+      do ev_k = 0, 1 - 1
+        ev_rate(ev_k) = 0.0_c_double
+        ev_dold(ev_k) = -1.0_c_double
+      end do
     end if
     if (start >= 0) then
       res = start
@@ -4870,29 +5016,45 @@ contains
         h_acc = h
         err_acc = max(1e-2_c_double, err)
         call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)
-        ev_need = merge(1, 0, g < ntimes .and. times(g) < (merge(t1, t + h, last)))
-        do ev_k = 0, 1 - 1
-          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
-              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
-              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
-              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
-              ieee_is_finite(ev_end(ev_k)))) then
-            ev_need = 1
-          end if
-        end do
-        if (ev_need /= 0) then
-        end if
         ev_stop = merge(t1, t + h, last)
         ev_halt = -1
         ev_ta = t
-        ev_j = 0
-        do
-          if (ev_j >= 1) then
-            exit
+        ev_cap = ((merge(t1, t + h, last)) - t) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
+        do ev_k = 0, 1 - 1
+          ev_seen(ev_k) = 0.0_c_double
+        end do
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 0, nx - 1
+            ev_y(i) = x(i) * (1.0_c_double - ((t + ev_del) - t) / h) + (((t + ev_del) - t) / h) * &
+                (xnew(i) + (1.0_c_double - ((t + ev_del) - t) / h) * (dense(i, &
+                0) + (((t + ev_del) - t) / h) * dense(i, 1)))
+          end do
+          call wheel_spinup_events(t + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do ev_k = 0, 1 - 1
+          if (ev_dold(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dold(ev_k)
           end if
-          ev_j = ev_j + 1
-          if (ev_j < 1) then
-            ev_tb = t + ((merge(t1, t + h, last)) - t) * (real(ev_j, c_double) / 1.0_c_double)
+        end do
+        do
+          ev_tb = ev_ta + ev_dt
+          ev_last = 0
+          if (ev_tb >= (merge(t1, t + h, last))) then
+            ev_tb = merge(t1, t + h, last)
+            ev_last = 1
+          end if
+          if (ev_last == 0) then
             do i = 0, nx - 1
               ev_y(i) = x(i) * (1.0_c_double - (ev_tb - t) / h) + ((ev_tb - t) / h) * (xnew(i) + &
                   (1.0_c_double - (ev_tb - t) / h) * (dense(i, 0) + ((ev_tb - t) / h) * dense(i, &
@@ -4903,10 +5065,39 @@ contains
               ev_new(ev_k) = ev_g(ev_k)
             end do
           else
-            ev_tb = merge(t1, t + h, last)
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
             end do
+          end if
+          do i = 0, nx - 1
+            ev_y(i) = x(i) * (1.0_c_double - ((ev_tb + (-ev_del)) - t) / h) + (((ev_tb + &
+                (-ev_del)) - t) / h) * (xnew(i) + (1.0_c_double - ((ev_tb + (-ev_del)) - t) / h) &
+                * (dense(i, 0) + (((ev_tb + (-ev_del)) - t) / h) * dense(i, 1)))
+          end do
+          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          ev_res = 1
+          do ev_k = 0, 1 - 1
+            if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k))) .or. (ev_tb - ev_ta) * ev_rate(ev_k) > &
+                (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k)))) then
+              ev_res = 0
+            end if
+          end do
+          if (ev_res == 0 .and. ev_dt > ((merge(t1, t + h, &
+              last)) - t) * 1.52587890625e-05_c_double) then
+            ev_dt = 0.5_c_double * ev_dt
+            cycle
           end if
           do ev_k = 0, 1 - 1
             ev_t(ev_k) = huge(1.0_c_double)
@@ -5149,8 +5340,18 @@ contains
           end if
           do ev_k = 0, 1 - 1
             ev_old(ev_k) = ev_new(ev_k)
+            ev_dold(ev_k) = ev_dnew(ev_k)
           end do
+          if (ev_last /= 0) then
+            do ev_k = 0, 1 - 1
+              ev_rate(ev_k) = ev_seen(ev_k)
+            end do
+            exit
+          end if
           ev_ta = ev_tb
+          if (ev_res /= 0) then
+            ev_dt = min(2.0_c_double * ev_dt, ev_cap)
+          end if
         end do
         do
           if (.not. (g < ntimes)) then
@@ -6400,6 +6601,10 @@ contains
     real(c_double) :: ev_end(0:0)
     real(c_double) :: ev_g(0:0)
     real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_rate(0:0)
+    real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_seen(0:0)
+    real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
     real(c_double) :: ev_a
     real(c_double) :: ev_b
@@ -6412,12 +6617,15 @@ contains
     real(c_double) :: ev_stop
     real(c_double) :: ev_ta
     real(c_double) :: ev_tb
+    real(c_double) :: ev_dt
+    real(c_double) :: ev_del
+    real(c_double) :: ev_cap
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
     integer(c_int) :: ev_it
-    integer(c_int) :: ev_j
-    integer(c_int) :: ev_need
+    integer(c_int) :: ev_last
+    integer(c_int) :: ev_res
     real(c_double), parameter :: is_angle(0:7) = [1.0_c_double, 1.0_c_double, 1.0_c_double, &
         1.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double, 0.0_c_double]
     real(c_double) :: a1
@@ -6445,6 +6653,10 @@ contains
       end do
       g = 1
       call wheel_spinup_events(t0, x, c, ev_old)
+      do ev_k = 0, 1 - 1
+        ev_rate(ev_k) = 0.0_c_double
+        ev_dold(ev_k) = -1.0_c_double
+      end do
     end if
     if (start >= 0) then
       res = start
@@ -6673,29 +6885,46 @@ contains
           ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
         end do
         call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)
-        ev_need = merge(1, 0, g < ntimes .and. times(g) < (merge(t1, t + h, last)))
-        do ev_k = 0, 1 - 1
-          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
-              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
-              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
-              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
-              ieee_is_finite(ev_end(ev_k)))) then
-            ev_need = 1
-          end if
-        end do
-        if (ev_need /= 0) then
-        end if
         ev_stop = merge(t1, t + h, last)
         ev_halt = -1
         ev_ta = t
-        ev_j = 0
-        do
-          if (ev_j >= 1) then
-            exit
+        ev_cap = ((merge(t1, t + h, last)) - t) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
+        do ev_k = 0, 1 - 1
+          ev_seen(ev_k) = 0.0_c_double
+        end do
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 0, nx - 1
+            ev_y(i) = xnew(i) + (((t + ev_del) - (merge(t1, t + h, &
+                last))) / h) * (ak1(i) + (((t + ev_del) - (merge(t1, t + h, &
+                last))) / h + 0.35505102572168223_c_double) * (ak2(i) + (((t + ev_del) - &
+                (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+          end do
+          call wheel_spinup_events(t + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do ev_k = 0, 1 - 1
+          if (ev_dold(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dold(ev_k)
           end if
-          ev_j = ev_j + 1
-          if (ev_j < 1) then
-            ev_tb = t + ((merge(t1, t + h, last)) - t) * (real(ev_j, c_double) / 1.0_c_double)
+        end do
+        do
+          ev_tb = ev_ta + ev_dt
+          ev_last = 0
+          if (ev_tb >= (merge(t1, t + h, last))) then
+            ev_tb = merge(t1, t + h, last)
+            ev_last = 1
+          end if
+          if (ev_last == 0) then
             do i = 0, nx - 1
               ev_y(i) = xnew(i) + ((ev_tb - (merge(t1, t + h, &
                   last))) / h) * (ak1(i) + ((ev_tb - (merge(t1, t + h, &
@@ -6707,10 +6936,40 @@ contains
               ev_new(ev_k) = ev_g(ev_k)
             end do
           else
-            ev_tb = merge(t1, t + h, last)
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
             end do
+          end if
+          do i = 0, nx - 1
+            ev_y(i) = xnew(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
+                last))) / h) * (ak1(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
+                last))) / h + 0.35505102572168223_c_double) * (ak2(i) + (((ev_tb + (-ev_del)) - &
+                (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+          end do
+          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          ev_res = 1
+          do ev_k = 0, 1 - 1
+            if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k))) .or. (ev_tb - ev_ta) * ev_rate(ev_k) > &
+                (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k)))) then
+              ev_res = 0
+            end if
+          end do
+          if (ev_res == 0 .and. ev_dt > ((merge(t1, t + h, &
+              last)) - t) * 1.52587890625e-05_c_double) then
+            ev_dt = 0.5_c_double * ev_dt
+            cycle
           end if
           do ev_k = 0, 1 - 1
             ev_t(ev_k) = huge(1.0_c_double)
@@ -6959,8 +7218,18 @@ contains
           end if
           do ev_k = 0, 1 - 1
             ev_old(ev_k) = ev_new(ev_k)
+            ev_dold(ev_k) = ev_dnew(ev_k)
           end do
+          if (ev_last /= 0) then
+            do ev_k = 0, 1 - 1
+              ev_rate(ev_k) = ev_seen(ev_k)
+            end do
+            exit
+          end if
           ev_ta = ev_tb
+          if (ev_res /= 0) then
+            ev_dt = min(2.0_c_double * ev_dt, ev_cap)
+          end if
         end do
         do
           if (.not. (g < ntimes)) then
@@ -8348,6 +8617,10 @@ contains
     real(c_double) :: ev_end(0:0)
     real(c_double) :: ev_g(0:0)
     real(c_double) :: ev_t(0:0)
+    real(c_double) :: ev_rate(0:0)
+    real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_seen(0:0)
+    real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
     real(c_double) :: ev_a
     real(c_double) :: ev_b
@@ -8360,12 +8633,15 @@ contains
     real(c_double) :: ev_stop
     real(c_double) :: ev_ta
     real(c_double) :: ev_tb
+    real(c_double) :: ev_dt
+    real(c_double) :: ev_del
+    real(c_double) :: ev_cap
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
     integer(c_int) :: ev_it
-    integer(c_int) :: ev_j
-    integer(c_int) :: ev_need
+    integer(c_int) :: ev_last
+    integer(c_int) :: ev_res
     integer(c_int) :: ev_k
     integer(c_int) :: i
     integer(c_int) :: j
@@ -8389,6 +8665,10 @@ contains
       end do
       g = 1
       call wheel_spinup_events(t0, x, c, ev_old)
+      do ev_k = 0, 1 - 1
+        ev_rate(ev_k) = 0.0_c_double
+        ev_dold(ev_k) = -1.0_c_double
+      end do
     end if
     if (code >= 0) then
       res = code
@@ -8735,29 +9015,52 @@ contains
       cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
       if (ok) then
         call wheel_spinup_events(t, xnew, c, ev_end)
-        ev_need = merge(1, 0, g < ntimes .and. times(g) < t)
-        do ev_k = 0, 1 - 1
-          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
-              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
-              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
-              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
-              ieee_is_finite(ev_end(ev_k)))) then
-            ev_need = 1
-          end if
-        end do
-        if (ev_need /= 0) then
-        end if
         ev_stop = t
         ev_halt = -1
         ev_ta = told
-        ev_j = 0
-        do
-          if (ev_j >= 1) then
-            exit
+        ev_cap = (t - told) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = (t - told) * 1.52587890625e-05_c_double
+        do ev_k = 0, 1 - 1
+          ev_seen(ev_k) = 0.0_c_double
+        end do
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 0, 7 - 1
+            acc(i) = tay(i, order)
+          end do
+          do q = 0, order - 1 - 1
+            do i = 0, 7 - 1
+              acc(i) = tay(i, (order - 1) - q) + ((told + ev_del) - told) * acc(i)
+            end do
+          end do
+          do i = 0, 7 - 1
+            ev_y(i) = x(i) + ((told + ev_del) - told) * acc(i)
+          end do
+          ev_y(7) = x(7) + ((told + ev_del) - told) * tay(7, 1)
+          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do ev_k = 0, 1 - 1
+          if (ev_dold(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dold(ev_k)
           end if
-          ev_j = ev_j + 1
-          if (ev_j < 1) then
-            ev_tb = told + (t - told) * (real(ev_j, c_double) / 1.0_c_double)
+        end do
+        do
+          ev_tb = ev_ta + ev_dt
+          ev_last = 0
+          if (ev_tb >= t) then
+            ev_tb = t
+            ev_last = 1
+          end if
+          if (ev_last == 0) then
             do i = 0, 7 - 1
               acc(i) = tay(i, order)
             end do
@@ -8775,10 +9078,45 @@ contains
               ev_new(ev_k) = ev_g(ev_k)
             end do
           else
-            ev_tb = t
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
             end do
+          end if
+          do i = 0, 7 - 1
+            acc(i) = tay(i, order)
+          end do
+          do q = 0, order - 1 - 1
+            do i = 0, 7 - 1
+              acc(i) = tay(i, (order - 1) - q) + ((ev_tb + (-ev_del)) - told) * acc(i)
+            end do
+          end do
+          do i = 0, 7 - 1
+            ev_y(i) = x(i) + ((ev_tb + (-ev_del)) - told) * acc(i)
+          end do
+          ev_y(7) = x(7) + ((ev_tb + (-ev_del)) - told) * tay(7, 1)
+          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+              ev_seen(ev_k) = ev_dnew(ev_k)
+            end if
+          end do
+          ev_res = 1
+          do ev_k = 0, 1 - 1
+            if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k))) .or. (ev_tb - ev_ta) * ev_rate(ev_k) > &
+                (merge(2.0_c_double, 1.0_c_double, &
+                (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. &
+                (ev_old(ev_k) > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * &
+                (abs(ev_old(ev_k)) + abs(ev_new(ev_k)))) then
+              ev_res = 0
+            end if
+          end do
+          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double) then
+            ev_dt = 0.5_c_double * ev_dt
+            cycle
           end if
           do ev_k = 0, 1 - 1
             ev_t(ev_k) = huge(1.0_c_double)
@@ -9063,8 +9401,18 @@ contains
           end if
           do ev_k = 0, 1 - 1
             ev_old(ev_k) = ev_new(ev_k)
+            ev_dold(ev_k) = ev_dnew(ev_k)
           end do
+          if (ev_last /= 0) then
+            do ev_k = 0, 1 - 1
+              ev_rate(ev_k) = ev_seen(ev_k)
+            end do
+            exit
+          end if
           ev_ta = ev_tb
+          if (ev_res /= 0) then
+            ev_dt = min(2.0_c_double * ev_dt, ev_cap)
+          end if
         end do
         do
           if (.not. (g < ntimes)) then

@@ -43,16 +43,18 @@ extern "C" {
  * (out[(i*ntimes + g)*WHEEL_SPINUP_NX + j]).
  * The _events variants are the _grid ones with the scene's events located
  * (wheel_spinup_events in wheel_spinup.h):
- * g is evaluated at each accepted step's end (the events read the states
- * alone), an event whose g changed sign over the step as its direction asks
+ * each accepted step is searched in pieces on its interpolant, from the
+ * whole step (the events read the states alone),
+ * a piece halved until the largest rate of g seen (in the step and the
+ * one before) could not carry g to 0 and back within it (down to
+ * 2^-16 of the step); an event whose g changes sign in a piece as its direction asks
  * is located on the interpolant by the Illinois method until no double lies
  * between the bracket's ends, and the crossings are logged in time order:
  * log_t[e], log_k[e] (the event, from 0) and log_x[e*WHEEL_SPINUP_NX + j], *nlog of
  * them. A terminal event stops the run there (WHEEL_SPINUP_ODE_EVENT: x and
  * stats.t at the event, grid rows past it not written); a crossing past
  * capacity logged ones stops it as well (WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL). A g of 0
- * at times[0] is no crossing; two sign changes of one g within one
- * step cancel, unseen; a NaN g never crosses. The _events_batch variants run n
+ * at times[0] is no crossing; a NaN g never crosses. The _events_batch variants run n
  * states over the same times, each with a log of capacity entries of its own
  * (log_t[i*capacity + e], log_k likewise, log_x[(i*capacity + e)*WHEEL_SPINUP_NX + j],
  * nlog[i]).

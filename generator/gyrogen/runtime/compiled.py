@@ -974,9 +974,12 @@ class Compiled:
     ) -> tuple[np.ndarray, EventLog, Stats, int]:
         """`integrate_grid` with the scene's [[events]] located.
 
-        After each accepted step the integrator evaluates every event's g at
-        its end; an event whose g changed sign there as its direction asks
-        is located on the step's dense output (the Illinois method, until
+        After each accepted step the integrator searches the step's dense
+        output in pieces, halved until the largest rate of g seen could not
+        carry g to 0 and back within one (so an event faster than the
+        motion the steps follow loses no crossing); an event whose g
+        changed sign in a piece as its direction asks is located on the
+        dense output (the Illinois method, until
         the bracket holds no double between its ends) and logged, the
         crossings of one step in time order. A terminal event stops the run
         there: x is the state at the event, the grid's rows past it stay
@@ -984,11 +987,9 @@ class Compiled:
         logged ones stops the run the same way with code 9.
 
         Limits: a g of 0 at times[0] is not a crossing (nor is one at a
-        step's start: it was the step before's); two crossings of one event
-        within one step (an eighth of one for an event that reads t: a
-        double root, a grazing touch) cancel and are not seen, so limit the
-        step (tighter tolerances) where g oscillates faster than the
-        motion; a NaN g never crosses (a crossing before g turns NaN
+        piece's start: it was the piece before's); two crossings of one
+        event within 2^-16 of a step (a double root, a grazing touch)
+        cancel and are not seen; a NaN g never crosses (a crossing before g turns NaN
         within a step is located: the step is searched up to g's last
         finite point, and one after g turns finite from its first finite
         point).

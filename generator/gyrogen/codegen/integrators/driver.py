@@ -39,6 +39,7 @@ from gyrogen.codegen.ir.nodes import (
     Break,
     Call,
     Const,
+    Continue,
     Decl,
     E,
     For,
@@ -124,7 +125,13 @@ def started(m: Method, f0: E, into: Var, grid: bool | Grid = False) -> list[S]:
         return [assign(into, fn("ode_start", *args)), stopped(into)]
     first = grid_first(Int(0))
     if isinstance(grid, Grid) and grid.events:  # g at the start: a crossing's first side
-        first += [Call("events", (t0, x, c, EV_OLD))]
+        ne = Int(len(grid.events))  # no rate seen before the first step
+        first += [
+            Call("events", (t0, x, c, EV_OLD)),
+            For(
+                "ev_k", ne, (assign(EV_RATE[Var("ev_k")], 0.0), assign(EV_DOLD[Var("ev_k")], -1.0))
+            ),
+        ]
     return [
         *grid_start(),
         *([assign(NLOG, 0)] if isinstance(grid, Grid) and grid.events else []),
@@ -347,8 +354,14 @@ class Grid:
 
     events: tuple[Event, ...] = ()
     pieces: int = 1
-    """How many equal pieces each accepted step is searched in
-    (EV_SUBINTERVALS where an event reads the time, else 1)."""
+    """The fewest pieces each accepted step is searched in, each at most
+    this fraction of it (EV_SUBINTERVALS where an event reads the time,
+    else 1: from the whole step); halved from there (events_in_step)."""
+
+    @property
+    def floor_exponent(self) -> int:
+        """EV_FLOOR as a power of 2 (for the header's text)."""
+        return round(math.log2(EV_FLOOR))
 
 
 EV_OLD, EV_NEW, EV_G, EV_T, EV_Y = (Var(n) for n in ("ev_old", "ev_new", "ev_g", "ev_t", "ev_y"))
@@ -382,6 +395,11 @@ def grid_params(grid: bool | Grid) -> tuple[Decl, ...]:
     return (*GRID_PARAMS[:-1], *log, GRID_PARAMS[-1])
 
 
+SEARCH_REALS = ("a", "b", "ga", "gb", "m", "gm", "f", "gf", "stop", "ta", "tb", "dt", "del", "cap")
+SEARCH_INTS = ("side", "best", "halt", "it", "last", "res")
+"""The scalars of a step's search for crossings (ev_ and these names)."""
+
+
 def event_locals(grid: bool | Grid) -> tuple[Decl, ...]:
     """What an _events twin adds to its locals: the events' tables (their
     directions and terminal flags), g at the step's two ends, the crossings'
@@ -393,13 +411,10 @@ def event_locals(grid: bool | Grid) -> tuple[Decl, ...]:
         Decl("ev_dir", "int", (ne,), values=tuple(e.direction for e in grid.events)),
         Decl("ev_term", "int", (ne,), values=tuple(int(e.terminal) for e in grid.events)),
         *(Decl(f"ev_{n}", "double", (ne,), "inout") for n in ("old", "new", "end", "g", "t")),
+        *(Decl(f"ev_{n}", "double", (ne,), "inout") for n in ("rate", "dold", "seen", "dnew")),
         Decl("ev_y", "double", ("NX",), "inout"),
-        *(
-            real(f"ev_{n}", "inout")
-            for n in ("a", "b", "ga", "gb", "m", "gm", "f", "gf", "stop", "ta", "tb")
-        ),
-        *(Decl(f"ev_{n}", "int", (), "inout") for n in ("side", "best", "halt", "it", "j")),
-        *([Decl("ev_need", "int", (), "inout")] if grid.pieces == 1 else []),
+        *(real(f"ev_{n}", "inout") for n in SEARCH_REALS),
+        *(Decl(f"ev_{n}", "int", (), "inout") for n in SEARCH_INTS),
     )
 
 
@@ -451,17 +466,63 @@ def _search(dense: Interpolant, at: Callable[[E], E], k: E, start: E, end: E,
 
 
 EV_SUBINTERVALS = 8
-"""The pieces each accepted step is searched in when an event reads the
-time (or a tabulated input): a crossing is seen where g changes sign
-between two neighbouring points of the interpolant (DifferentialEquations.jl's
-ContinuousCallback looks at 10), so that an event faster than the motion
-the steps follow is still seen (sin(3 t) on dual_spin, whose steps span its
-period: with g at the steps' ends alone, 6 of its 95 crossings). An event
-on the states alone changes no faster than they do, within a step the
-error control keeps smooth: it is searched at the steps' ends alone (as
-scipy's solve_ivp looks), the interpolant's coefficients computed only for
-a step with a sign change or a grid time in it (the default scene's three
-such events: 1.6-2.5x the plain run with 8 pieces, `make bench-events`)."""
+"""The pieces each accepted step is at least searched in when an event
+reads the time (or a tabulated input): a crossing is seen where g changes
+sign between two neighbouring points of the interpolant (DifferentialEquations.jl's
+ContinuousCallback looks at 10). An event on the states alone starts from
+the whole step. Either way a piece is then halved until it is resolved
+(_resolved), so that an event faster than the motion the steps follow is
+seen: sin(3 t) on dual_spin, whose steps span its period, or sin(q4) on
+wheel_spinup, whose wheel turns 95 times in one of dop853's steps (with g
+at the steps' ends alone, 9 of its 382 crossings were logged)."""
+EV_FLOOR = 2.0**-16
+"""The shortest piece a step is halved down to, as a fraction of the step:
+there a piece is taken resolved or not (g touching 0 without crossing, or
+a crossing pair narrower than this)."""
+EV_DELTA = 2.0**-16
+"""The difference that gives g's rate at a piece's end, as a fraction of
+the step (a one-sided difference on the interpolant, inward): short
+against g's period up to 2^16 periods a step, long enough that g's
+rounding makes no rate (g resting at 0, a conserved quantity at its own
+level, had its pieces halved to EV_FLOOR with 2^-24 of the step)."""
+EV_RATE, EV_DOLD = Var("ev_rate"), Var("ev_dold")
+EV_SEEN, EV_DNEW = Var("ev_seen"), Var("ev_dnew")
+EV_DT, EV_DEL, EV_CAP, EV_LAST, EV_RES = (
+    Var(f"ev_{n}") for n in ("dt", "del", "cap", "last", "res")
+)
+
+
+def _rate(dense: Interpolant, at: Callable[[E], E], ne: E, time: E, g: E, step: E) -> list[S]:
+    """ev_dnew[k] := event k's rate at time in size (g: every event's g
+    there), by the difference to the interpolant at time + step (step < 0:
+    before it); ev_seen[k] := the larger of it and ev_seen[k] (a NaN rate
+    is never larger)."""
+    k = Var("ev_k")
+    return [
+        *_g_at(dense, at, time + step),
+        For("ev_k", ne, (
+            assign(EV_DNEW[k], fn("abs", EV_G[k] - g[k]) / fn("abs", step)),
+            If(cmp(EV_DNEW[k], ">", EV_SEEN[k]), (assign(EV_SEEN[k], EV_DNEW[k]),)),
+        )),
+    ]  # fmt: skip
+
+
+def _resolved(ne: E) -> list[S]:
+    """ev_res := 1 unless some event's g may cross 0 twice more within the
+    piece from ev_ta to ev_tb: the piece's length times g's largest rate
+    seen (within this step, at every point g was looked at, or in the step
+    before, ev_rate) exceeds what g must travel (|g| at both ends for a g
+    of one sign there, twice that for one that changes sign). A NaN at an
+    end leaves the piece resolved (_finite_edge's work). The largest rate
+    seen, not the rates at the ends alone: g = sin(q4) on a wheel that
+    turns many times a step has near 0 rates at ends near its extrema."""
+    k = Var("ev_k")
+    length = Var("ev_tb") - Var("ev_ta")
+    opposite = or_(and_(cmp(EV_OLD[k], "<", 0.0), cmp(EV_NEW[k], ">", 0.0)),
+                   and_(cmp(EV_OLD[k], ">", 0.0), cmp(EV_NEW[k], "<", 0.0)))  # fmt: skip
+    travel = sel(opposite, Num(2.0), Num(1.0)) * (fn("abs", EV_OLD[k]) + fn("abs", EV_NEW[k]))
+    fast = or_(cmp(length * EV_SEEN[k], ">", travel), cmp(length * EV_RATE[k], ">", travel))
+    return [assign(EV_RES, 1), For("ev_k", ne, (If(fast, (assign(EV_RES, 0),)),))]
 
 
 def _finite_edge(
@@ -521,35 +582,26 @@ def _crossed(k: E, new: E) -> E:
 
 
 def needed(grid: Grid, end: E, coefficients: tuple[S, ...] | list[S]) -> list[S]:
-    """g at the step's end (on xnew: no interpolant), and the interpolant's
-    coefficients only when something reads them: a grid time before the
-    end, a sign change (with one piece), or the pieces between the ends."""
-    ne, k, need, g_end = Int(len(grid.events)), Var("ev_k"), Var("ev_need"), Var("ev_end")
-    if grid.pieces > 1:
-        return [Call("events", (end, xnew, c, g_end)), *coefficients]
-    changed = or_(_crossed(k, g_end[k]), _turned_nan(k, g_end[k]), _turned_finite(k, g_end[k]))
-    return [
-        Call("events", (end, xnew, c, g_end)),
-        assign(need, sel(due(end), Int(1), Int(0))),
-        For(
-            "ev_k",
-            ne,
-            (If(changed, (assign(need, 1),)),),
-        ),
-        If(cmp(need, "!=", 0), tuple(coefficients)),
-    ]
+    """g at the step's end (on xnew: no interpolant), then the interpolant's
+    coefficients: the search reads g's rates on it in every step."""
+    return [Call("events", (end, xnew, c, Var("ev_end"))), *coefficients]
 
 
 def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: E,
                    end: E, base: E | None = None) -> list[S]:  # fmt: skip
-    """g at the grid.pieces - 1 points between the step's ends (on the
-    interpolant; g at its end is needed's); in each piece, each event whose
-    g changed sign as its direction asks (_crossed), located (or whose g
-    turned NaN or infinite there: a crossing before its last finite point,
-    _finite_edge); the piece's crossings in time order into the log, up to the first terminal
-    one or a full log, where the step stops (ev_stop, ev_halt its code).
-    base: the log's first row (LBASE over lanes: the lane's trajectory's)."""
-    ne, k, j = Int(len(grid.events)), Var("ev_k"), Var("ev_j")
+    """The step from start to end in pieces, from the first to the last: a
+    piece as long as the last one taken, twice that after a resolved one,
+    never longer than a grid.pieces-th of the step, halved until g at its
+    ends and their rates say no event crossed 0 twice unseen within it
+    (_resolved, down to EV_FLOOR of the step); g on the interpolant (at the
+    step's end, needed's); in each piece, each event whose g changed sign
+    as its direction asks (_crossed), located (or whose g turned NaN or
+    infinite there: a crossing before its last finite point, _finite_edge);
+    the piece's crossings in time order into the log, up to the first
+    terminal one or a full log, where the step stops (ev_stop, ev_halt its
+    code). base: the log's first row (LBASE over lanes: the lane's
+    trajectory's)."""
+    ne, k = Int(len(grid.events)), Var("ev_k")
     entry = NLOG if base is None else base + NLOG
     ta, tb, g_end = Var("ev_ta"), Var("ev_tb"), Var("ev_end")
     best = EV_T[EV_BEST]
@@ -561,18 +613,28 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
         For("i", NX, (assign(Var("log_x")[entry, i], EV_Y[i]),)),
         inc(NLOG, 1),
     ]
-    point = start + (end - start) * (fn("real", j) / float(grid.pieces))
     return [
-        assign(EV_STOP, end), assign(EV_HALT, -1), assign(ta, start), assign(j, 0),
+        assign(EV_STOP, end), assign(EV_HALT, -1), assign(ta, start),
+        assign(EV_CAP, (end - start) * (1.0 / grid.pieces)), assign(EV_DT, EV_CAP),
+        assign(EV_DEL, (end - start) * EV_DELTA),
+        For("ev_k", ne, (assign(EV_SEEN[k], 0.0),)),
+        If(cmp(EV_DOLD[0], "<", 0.0), (  # the first step: no rate at its start yet
+            *_rate(dense, at, ne, start, EV_OLD, EV_DEL),
+            For("ev_k", ne, (assign(EV_DOLD[k], EV_DNEW[k]),)),
+        )),
+        For("ev_k", ne, (If(cmp(EV_DOLD[k], ">", EV_SEEN[k]), (assign(EV_SEEN[k], EV_DOLD[k]),)),)),
         Loop((
-            If(cmp(j, ">=", grid.pieces), (Break(),)),
-            inc(j, 1),
-            If(cmp(j, "<", grid.pieces), (
-                assign(tb, point), *_g_at(dense, at, tb),
-                For("ev_k", ne, (assign(EV_NEW[k], EV_G[k]),)),
+            assign(tb, ta + EV_DT), assign(EV_LAST, 0),
+            If(cmp(tb, ">=", end), (assign(tb, end), assign(EV_LAST, 1))),
+            If(cmp(EV_LAST, "==", 0), (
+                *_g_at(dense, at, tb), For("ev_k", ne, (assign(EV_NEW[k], EV_G[k]),)),
             ), (
-                assign(tb, end), For("ev_k", ne, (assign(EV_NEW[k], g_end[k]),)),
+                For("ev_k", ne, (assign(EV_NEW[k], g_end[k]),)),
             )),
+            *_rate(dense, at, ne, tb, EV_NEW, -EV_DEL),
+            *_resolved(ne),
+            If(and_(cmp(EV_RES, "==", 0), cmp(EV_DT, ">", (end - start) * EV_FLOOR)), (
+                assign(EV_DT, 0.5 * EV_DT), Continue())),
             For("ev_k", ne, (
                 assign(EV_T[k], Const("HUGE")),
                 If(_crossed(k, EV_NEW[k]), tuple(_search(dense, at, k, ta, tb, EV_NEW[k])), (
@@ -601,8 +663,11 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
                 assign(best, Const("HUGE")),
             )),
             If(cmp(EV_HALT, ">=", 0), (Break(),)),
-            For("ev_k", ne, (assign(EV_OLD[k], EV_NEW[k]),)),
+            For("ev_k", ne, (assign(EV_OLD[k], EV_NEW[k]), assign(EV_DOLD[k], EV_DNEW[k]))),
+            If(cmp(EV_LAST, "!=", 0), (
+                For("ev_k", ne, (assign(EV_RATE[k], EV_SEEN[k]),)), Break())),
             assign(ta, tb),
+            If(cmp(EV_RES, "!=", 0), (assign(EV_DT, fn("min", 2.0 * EV_DT, EV_CAP)),)),
         )),
     ]  # fmt: skip
 
@@ -631,12 +696,15 @@ LBASE = Var("lbase")
 
 def lane_event_state(grid: Grid) -> tuple[Decl, ...]:
     """What struct lanes holds for the events: per lane g at the step's
-    start and end (ev_old, ev_end), the entries logged (nlog) and the
+    start and end (ev_old, ev_end), g's largest rate seen in the step
+    before (ev_rate) and its rate at the step's start (ev_dold, < 0 before
+    the first step), the entries logged (nlog) and the
     first one's row (lbase); the same on every lane: capacity (intent "in")
     and what the lanes write (intent "out"), the log (capacity entries a
     trajectory) and each trajectory's count (nlogs)."""
     ne = len(grid.events)
     return (Decl("ev_old", "double", (ne,), "inout"), Decl("ev_end", "double", (ne,), "inout"),
+            Decl("ev_rate", "double", (ne,), "inout"), Decl("ev_dold", "double", (ne,), "inout"),
             Decl("nlog", "long", (), "inout"), Decl("lbase", "long", (), "inout"),
             Decl("capacity", "long"), Decl("log_t", "double", ("capacity",), "out"),
             Decl("log_k", "int", ("capacity",), "out"),
@@ -647,20 +715,14 @@ def lane_event_state(grid: Grid) -> tuple[Decl, ...]:
 def lane_event_locals(grid: Grid) -> tuple[Decl, ...]:
     """event_locals of a step over lanes: the search runs lane by lane, so
     its values are one lane's at a time (intent "in": one of each, not one
-    per lane), but for ev_need, per lane (0 at first: a lane not taken
-    reads it only under ok, which gcc cannot tell); ev_old and ev_end are
-    the struct's."""
+    per lane); ev_old and ev_end are the struct's."""
     ne = len(grid.events)
     return (
         *(d for d in event_locals(grid) if d.values),
-        *(Decl(f"ev_{n}", "double", (ne,), "in") for n in ("new", "g", "t")),
+        *(Decl(f"ev_{n}", "double", (ne,), "in") for n in ("new", "g", "t", "seen", "dnew")),
         Decl("ev_y", "double", ("NX",), "in"),
-        *(
-            real(f"ev_{n}", "in")
-            for n in ("a", "b", "ga", "gb", "m", "gm", "f", "gf", "stop", "ta", "tb")
-        ),
-        *(Decl(f"ev_{n}", "int", (), "in") for n in ("side", "best", "halt", "it", "j")),
-        Decl("ev_need", "int", (), "inout", init=Num(0.0)),
+        *(real(f"ev_{n}", "in") for n in SEARCH_REALS),
+        *(Decl(f"ev_{n}", "int", (), "in") for n in SEARCH_INTS),
     )
 
 
@@ -668,43 +730,27 @@ def lane_events(grid: Grid, dense: Interpolant, ok: Var, cd: Var, end: E, start:
                 row: E) -> list[S]:  # fmt: skip
     """inside with events for a branch-free step over lanes, after its
     selections (t its end, the step counted), each lane as _events runs it:
-    g at the step's end and whether the lane needs its interpolant (a grid
-    time or a sign change in its step; every lane with pieces), lane by
-    lane on the scalar <prefix>_events; the coefficients where needed (the
-    rhs when any lane needs it); the search, the log and the grid lane by
-    lane on the lanes that need them; ev_old := ev_end on the others. A
-    stop at an event sets the lane's code and ok := 0 (the step's end is
-    not taken)."""
-    ne, k = Int(len(grid.events)), Var("ev_k")
-    need, g_end = Var("ev_need"), Var("ev_end")
+    g at the step's end, lane by lane on the scalar <prefix>_events; the
+    coefficients on the lanes taken (the rhs when any lane needs it); the
+    search, the log and the grid lane by lane on those lanes. A stop at an
+    event sets the lane's code and ok := 0 (the step's end is not taken)."""
+    ne, k, g_end = Int(len(grid.events)), Var("ev_k"), Var("ev_end")
     at = theta_at(dense, end, start, step)
-    wanted: list[S] = [assign(need, 1)] if grid.pieces > 1 else [
-        assign(need, sel(due(end), Int(1), Int(0))),
-        For("ev_k", ne, (
-            If(or_(_crossed(k, g_end[k]), _turned_nan(k, g_end[k])), (assign(need, 1),)),)),
-    ]  # fmt: skip
     ends = If(ok, (
         For("i", NX, (assign(EV_Y[i], xnew[i]),)),
         Call("events", (end, EV_Y, c, EV_G)),
         For("ev_k", ne, (assign(g_end[k], EV_G[k]),)),
-        *wanted,
     ))  # fmt: skip
     halt = (assign(cd, EV_HALT), assign(ok, Bool(False)))
-    search = If(and_(ok, cmp(need, "!=", 0)), (
+    search = If(ok, (
         *events_in_step(grid, dense, at, start, end, LBASE),
         writes(dense, at, EV_STOP, row),
         *events_stop(dense, at, True, row, halt),
     ))  # fmt: skip
     coefficients = (
-        [If(and_(ok, cmp(need, "!=", 0)), dense.coefficients, own=dense.scratch)]
-        if dense.coefficients else []
+        [If(ok, dense.coefficients, own=dense.scratch)] if dense.coefficients else []
     )  # fmt: skip
-    return [
-        ends,
-        *coefficients,
-        search,
-        For("ev_k", ne, (If(and_(ok, cmp(need, "==", 0)), (assign(EV_OLD[k], g_end[k]),)),)),
-    ]
+    return [ends, *coefficients, search]
 
 
 def reached(row: E = G, ok: E | None = None) -> list[S]:
