@@ -27,7 +27,14 @@ REPO = Path(__file__).resolve().parents[1]
 def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The run's build cache, one for all its xdist workers (an entry is
     renamed into place whole, so a worker never reads another's half-built
-    one): the same sources are compiled once per run."""
+    one): the same sources are compiled once per run. GYROGEN_TEST_CACHE
+    names one kept from run to run instead (`make test-fast`'s): an entry's
+    name is the hash of what built it, so a run takes from it only what it
+    would have built the same."""
+    kept = os.environ.get("GYROGEN_TEST_CACHE")
+    if kept:
+        Path(kept).mkdir(parents=True, exist_ok=True)
+        return Path(kept)
     cache = shared_dir(tmp_path_factory) / "cache"
     cache.mkdir(exist_ok=True)
     return cache
