@@ -5,6 +5,9 @@ numpy reference, which reads the same expressions on its own."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -791,14 +794,19 @@ SPINNING = """
 name = "wheel_turn"
 expr = "sin(q4)"
 direction = "up"
+
+[[events]]
+name = "fast_t"
+expr = "sin(3*t)"
 """
 
 
 @pytest.fixture(scope="module")
 def spinning(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Scene]:
-    """wheel_spinup with an event on its wheel's angle: the wheel spins up to
-    80 rad/s in 60 s, turning 382 times, while the carrier's slow motion
-    lets the error control take steps of several seconds."""
+    """wheel_spinup with an event on its wheel's angle and one on t: the
+    wheel spins up to 80 rad/s in 60 s, turning 382 times, while the
+    carrier's slow motion lets the error control take steps of several
+    seconds (several periods of sin(3 t) too)."""
     scene = parse(builtin_text("wheel_spinup") + SPINNING, "spinning")
     out = tmp_path_factory.mktemp("spinning")
     generate(scene, out)
@@ -834,6 +842,9 @@ def test_an_event_faster_than_the_motion_loses_no_crossing(
         assert code == 0 and np.sum(turn) == len(want), (method, np.sum(turn))
         assert np.max(np.abs(log.times[turn] - want)) < 1e-3, method  # within a grid step
         assert np.max(np.abs(np.sin(log.states[turn, 3]))) < 1e-9, method
+        third = log.times[np.array(log.names) == "fast_t"]  # k pi / 3, 57 of them
+        assert np.array_equal(np.round(third * 3 / np.pi), np.arange(1, 58)), method
+        assert np.max(np.abs(third - np.arange(1, 58) * np.pi / 3)) < 1e-9, method
 
 
 @pytest.mark.slow  # the lanes' batch beside the single calls
@@ -859,3 +870,36 @@ def test_an_event_faster_than_the_motion_is_found_over_lanes_as_alone(
             for i in range(5):
                 n = int(log_b.counts[i])
                 assert np.array_equal(log_b.times[i, :n], log.times), (method, torque, i)
+
+
+HANG = """
+import sys
+import numpy as np
+from pathlib import Path
+from gyrogen.runtime import build
+comp = build.build(Path(sys.argv[1]), sys.argv[2])
+x0 = np.zeros(8)
+x0[4] = 0.01
+for method in ("dopri5", "dop853", "rodas4", "radau5", "taylor"):
+    t0 = float(sys.argv[3])
+    code = comp.integrate_events(method, x0, comp.setup([0.02]), [t0, t0 + 10.0], rtol=1e-8,
+                                 atol=1e-8)[3]
+    print(method, code)
+"""
+
+
+@pytest.mark.parametrize("lang", ["c", pytest.param("fortran", marks=pytest.mark.slow)])
+def test_an_event_at_a_time_t_cannot_resolve_ends(
+    spinning: tuple[Path, Scene], cache_dir: Path, lang: str
+) -> None:
+    """At t = 1e12 sin(3 t) changes in steps of t's rounding (1.2e-4 s), so
+    pieces are never resolved; halving one until half of it is lost in t's
+    rounding made dop853's search loop for ever. Every method now ends the
+    run (code 0, or 1: the step lost in t), in a child with a deadline."""
+    out, _ = spinning
+    env = {**os.environ, "GYROGEN_CACHE": str(cache_dir)}
+    run = subprocess.run([sys.executable, "-c", HANG, str(out), lang, "1e12"], env=env,
+                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    codes = dict(line.split() for line in run.stdout.splitlines())
+    assert len(codes) == 5 and set(codes.values()) <= {"0", "1"}, codes

@@ -2537,7 +2537,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                 for (;;) {
                     ev_tb = ev_ta + ev_dt;
                     ev_last = 0;
-                    if (ev_tb >= L->t[l]) {
+                    if (ev_tb >= L->t[l] || ev_tb <= ev_ta) {
                         ev_tb = L->t[l];
                         ev_last = 1;
                     }
@@ -2583,7 +2583,8 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                             ev_res = 0;
                         }
                     }
-                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05) {
+                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05 && ev_ta +
+                            0.5 * ev_dt > ev_ta) {
                         ev_dt = 0.5 * ev_dt;
                         continue;
                     }
@@ -4257,7 +4258,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                 for (;;) {
                     ev_tb = ev_ta + ev_dt;
                     ev_last = 0;
-                    if (ev_tb >= L->t[l]) {
+                    if (ev_tb >= L->t[l] || ev_tb <= ev_ta) {
                         ev_tb = L->t[l];
                         ev_last = 1;
                     }
@@ -4309,7 +4310,8 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                             ev_res = 0;
                         }
                     }
-                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05) {
+                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05 && ev_ta +
+                            0.5 * ev_dt > ev_ta) {
                         ev_dt = 0.5 * ev_dt;
                         continue;
                     }
@@ -7193,7 +7195,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
             for (;;) {
                 ev_tb = ev_ta + ev_dt;
                 ev_last = 0;
-                if (ev_tb >= t) {
+                if (ev_tb >= t || ev_tb <= ev_ta) {
                     ev_tb = t;
                     ev_last = 1;
                 }
@@ -7236,7 +7238,8 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                         ev_res = 0;
                     }
                 }
-                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05) {
+                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05 && ev_ta + 0.5 * ev_dt
+                        > ev_ta) {
                     ev_dt = 0.5 * ev_dt;
                     continue;
                 }
@@ -8601,7 +8604,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
             for (;;) {
                 ev_tb = ev_ta + ev_dt;
                 ev_last = 0;
-                if (ev_tb >= t) {
+                if (ev_tb >= t || ev_tb <= ev_ta) {
                     ev_tb = t;
                     ev_last = 1;
                 }
@@ -8648,7 +8651,8 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                         ev_res = 0;
                     }
                 }
-                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05) {
+                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05 && ev_ta + 0.5 * ev_dt
+                        > ev_ta) {
                     ev_dt = 0.5 * ev_dt;
                     continue;
                 }
@@ -9791,7 +9795,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
             for (;;) {
                 ev_tb = ev_ta + ev_dt;
                 ev_last = 0;
-                if (ev_tb >= (last ? t1 : t + h)) {
+                if (ev_tb >= (last ? t1 : t + h) || ev_tb <= ev_ta) {
                     ev_tb = last ? t1 : t + h;
                     ev_last = 1;
                 }
@@ -9833,7 +9837,8 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                         ev_res = 0;
                     }
                 }
-                if (ev_res == 0 && ev_dt > ((last ? t1 : t + h) - t) * 1.52587890625e-05) {
+                if (ev_res == 0 && ev_dt > ((last ? t1 : t + h) - t) * 1.52587890625e-05 && ev_ta
+                        + 0.5 * ev_dt > ev_ta) {
                     ev_dt = 0.5 * ev_dt;
                     continue;
                 }
@@ -11489,7 +11494,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
             for (;;) {
                 ev_tb = ev_ta + ev_dt;
                 ev_last = 0;
-                if (ev_tb >= (last ? t1 : t + h)) {
+                if (ev_tb >= (last ? t1 : t + h) || ev_tb <= ev_ta) {
                     ev_tb = last ? t1 : t + h;
                     ev_last = 1;
                 }
@@ -11532,7 +11537,8 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                         ev_res = 0;
                     }
                 }
-                if (ev_res == 0 && ev_dt > ((last ? t1 : t + h) - t) * 1.52587890625e-05) {
+                if (ev_res == 0 && ev_dt > ((last ? t1 : t + h) - t) * 1.52587890625e-05 && ev_ta
+                        + 0.5 * ev_dt > ev_ta) {
                     ev_dt = 0.5 * ev_dt;
                     continue;
                 }
@@ -13497,7 +13503,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
             for (;;) {
                 ev_tb = ev_ta + ev_dt;
                 ev_last = 0;
-                if (ev_tb >= t) {
+                if (ev_tb >= t || ev_tb <= ev_ta) {
                     ev_tb = t;
                     ev_last = 1;
                 }
@@ -13553,7 +13559,8 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                         ev_res = 0;
                     }
                 }
-                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05) {
+                if (ev_res == 0 && ev_dt > (t - told) * 1.52587890625e-05 && ev_ta + 0.5 * ev_dt
+                        > ev_ta) {
                     ev_dt = 0.5 * ev_dt;
                     continue;
                 }

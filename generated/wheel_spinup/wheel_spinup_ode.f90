@@ -2158,7 +2158,7 @@ contains
         do
           ev_tb = ev_ta + ev_dt
           ev_last = 0
-          if (ev_tb >= t) then
+          if (ev_tb >= t .or. ev_tb <= ev_ta) then
             ev_tb = t
             ev_last = 1
           end if
@@ -2204,7 +2204,8 @@ contains
               ev_res = 0
             end if
           end do
-          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double) then
+          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double .and. ev_ta + &
+              0.5_c_double * ev_dt > ev_ta) then
             ev_dt = 0.5_c_double * ev_dt
             cycle
           end if
@@ -3716,7 +3717,7 @@ contains
         do
           ev_tb = ev_ta + ev_dt
           ev_last = 0
-          if (ev_tb >= t) then
+          if (ev_tb >= t .or. ev_tb <= ev_ta) then
             ev_tb = t
             ev_last = 1
           end if
@@ -3768,7 +3769,8 @@ contains
               ev_res = 0
             end if
           end do
-          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double) then
+          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double .and. ev_ta + &
+              0.5_c_double * ev_dt > ev_ta) then
             ev_dt = 0.5_c_double * ev_dt
             cycle
           end if
@@ -5050,7 +5052,7 @@ contains
         do
           ev_tb = ev_ta + ev_dt
           ev_last = 0
-          if (ev_tb >= (merge(t1, t + h, last))) then
+          if (ev_tb >= (merge(t1, t + h, last)) .or. ev_tb <= ev_ta) then
             ev_tb = merge(t1, t + h, last)
             ev_last = 1
           end if
@@ -5095,7 +5097,8 @@ contains
             end if
           end do
           if (ev_res == 0 .and. ev_dt > ((merge(t1, t + h, &
-              last)) - t) * 1.52587890625e-05_c_double) then
+              last)) - t) * 1.52587890625e-05_c_double .and. ev_ta + 0.5_c_double * ev_dt > &
+              ev_ta) then
             ev_dt = 0.5_c_double * ev_dt
             cycle
           end if
@@ -6920,7 +6923,7 @@ contains
         do
           ev_tb = ev_ta + ev_dt
           ev_last = 0
-          if (ev_tb >= (merge(t1, t + h, last))) then
+          if (ev_tb >= (merge(t1, t + h, last)) .or. ev_tb <= ev_ta) then
             ev_tb = merge(t1, t + h, last)
             ev_last = 1
           end if
@@ -6967,7 +6970,8 @@ contains
             end if
           end do
           if (ev_res == 0 .and. ev_dt > ((merge(t1, t + h, &
-              last)) - t) * 1.52587890625e-05_c_double) then
+              last)) - t) * 1.52587890625e-05_c_double .and. ev_ta + 0.5_c_double * ev_dt > &
+              ev_ta) then
             ev_dt = 0.5_c_double * ev_dt
             cycle
           end if
@@ -9056,7 +9060,7 @@ contains
         do
           ev_tb = ev_ta + ev_dt
           ev_last = 0
-          if (ev_tb >= t) then
+          if (ev_tb >= t .or. ev_tb <= ev_ta) then
             ev_tb = t
             ev_last = 1
           end if
@@ -9114,7 +9118,8 @@ contains
               ev_res = 0
             end if
           end do
-          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double) then
+          if (ev_res == 0 .and. ev_dt > (t - told) * 1.52587890625e-05_c_double .and. ev_ta + &
+              0.5_c_double * ev_dt > ev_ta) then
             ev_dt = 0.5_c_double * ev_dt
             cycle
           end if

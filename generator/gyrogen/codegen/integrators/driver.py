@@ -593,7 +593,9 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
     piece as long as the last one taken, twice that after a resolved one,
     never longer than a grid.pieces-th of the step, halved until g at its
     ends and their rates say no event crossed 0 twice unseen within it
-    (_resolved, down to EV_FLOOR of the step); g on the interpolant (at the
+    (_resolved, down to EV_FLOOR of the step, or to where half the piece
+    is lost in the rounding of t: a piece that ends on its start is the
+    rest of the step instead, so the loop always moves on); g on the interpolant (at the
     step's end, needed's); in each piece, each event whose g changed sign
     as its direction asks (_crossed), located (or whose g turned NaN or
     infinite there: a crossing before its last finite point, _finite_edge);
@@ -625,7 +627,7 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
         For("ev_k", ne, (If(cmp(EV_DOLD[k], ">", EV_SEEN[k]), (assign(EV_SEEN[k], EV_DOLD[k]),)),)),
         Loop((
             assign(tb, ta + EV_DT), assign(EV_LAST, 0),
-            If(cmp(tb, ">=", end), (assign(tb, end), assign(EV_LAST, 1))),
+            If(or_(cmp(tb, ">=", end), cmp(tb, "<=", ta)), (assign(tb, end), assign(EV_LAST, 1))),
             If(cmp(EV_LAST, "==", 0), (
                 *_g_at(dense, at, tb), For("ev_k", ne, (assign(EV_NEW[k], EV_G[k]),)),
             ), (
@@ -633,8 +635,8 @@ def events_in_step(grid: Grid, dense: Interpolant, at: Callable[[E], E], start: 
             )),
             *_rate(dense, at, ne, tb, EV_NEW, -EV_DEL),
             *_resolved(ne),
-            If(and_(cmp(EV_RES, "==", 0), cmp(EV_DT, ">", (end - start) * EV_FLOOR)), (
-                assign(EV_DT, 0.5 * EV_DT), Continue())),
+            If(and_(cmp(EV_RES, "==", 0), cmp(EV_DT, ">", (end - start) * EV_FLOOR),
+                    cmp(ta + 0.5 * EV_DT, ">", ta)), (assign(EV_DT, 0.5 * EV_DT), Continue())),
             For("ev_k", ne, (
                 assign(EV_T[k], Const("HUGE")),
                 If(_crossed(k, EV_NEW[k]), tuple(_search(dense, at, k, ta, tb, EV_NEW[k])), (
