@@ -14,6 +14,7 @@ import signal
 import sys
 from collections.abc import Callable
 from types import FrameType
+from typing import Any
 
 Handler = Callable[[int, FrameType | None], object] | int | None
 """A SIGINT handler as the signal module takes it (a function, SIG_IGN, SIG_DFL)."""
@@ -39,6 +40,18 @@ def _interrupted(signum: int, frame: FrameType | None) -> None:
     raise Interrupted
 
 
+def _unraisable(previous: Callable[[Any], object]) -> Callable[[Any], None]:
+    """sys.unraisablehook that is silent on Interrupted: raised where Python
+    cannot propagate it (an import lock's weakref callback, a __del__), it is
+    lost, not printed; main sees it in _caught and aborts after the command."""
+
+    def hook(unraisable: Any) -> None:
+        if not isinstance(getattr(unraisable, "exc_value", None), Interrupted):
+            previous(unraisable)
+
+    return hook
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point: one line per error, exit 1 for failures, 2 for usage,
     130 for Ctrl-C. argv None: this call is the process (the console script,
@@ -47,6 +60,8 @@ def main(argv: list[str] | None = None) -> None:
     (tests, in process), it puts the SIGINT handler back as it found it."""
     _caught.clear()
     previous = _install(_interrupted)
+    hook = sys.unraisablehook
+    sys.unraisablehook = _unraisable(hook)
     ended: SystemExit | None = None
     try:
         from gyrogen.files import transaction  # the standard library's only
@@ -59,6 +74,8 @@ def main(argv: list[str] | None = None) -> None:
             except SystemExit as exc:  # an error's exit code: what was written stays
                 ended = exc
             _install(signal.SIG_IGN)  # the command is over: a Ctrl-C now comes too late
+            if _caught:  # a Ctrl-C that Python could not raise (see _unraisable)
+                raise Interrupted
     except BaseException as exc:
         if isinstance(exc, SystemExit) or not (_caught or _from_ctrl_c(exc)):
             raise
@@ -70,6 +87,7 @@ def main(argv: list[str] | None = None) -> None:
             _install(signal.SIG_IGN)
         elif previous is not None:
             signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = hook
     if ended is not None:
         raise ended
 
