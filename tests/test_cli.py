@@ -71,7 +71,7 @@ def test_failed_write_leaves_nothing_half_written(
         real_replace(src, dst)
 
     monkeypatch.setattr(files_module.os, "replace", fail_second)
-    code, _, err = cli(["generate", "--out", str(out_dir)])
+    code, _, err = cli(["generate", "--no-check", "--out", str(out_dir)])
     assert code == 1
     assert (
         err == f"gyrogen: error: cannot write {out_dir / 'gyrostat.h'}: No space left on device\n"
@@ -97,7 +97,7 @@ def test_directory_in_the_way_writes_nothing(tmp_path: Path, cli) -> None:
     out_dir = tmp_path / "o"
     old = _old_sources(out_dir)
     (out_dir / "gyrostat_ode.c").mkdir()
-    code, out, err = cli(["generate", "--out", str(out_dir)])
+    code, out, err = cli(["generate", "--no-check", "--out", str(out_dir)])
     assert code == 1 and out == ""
     assert err == f"gyrogen: error: cannot write {out_dir / 'gyrostat_ode.c'}: Is a directory\n"
     assert _contents(out_dir) == old  # no new file, no temporary, the old ones as they were
@@ -108,7 +108,7 @@ def test_fifo_in_the_way_writes_nothing(tmp_path: Path, cli) -> None:
     out_dir = tmp_path / "o"
     old = _old_sources(out_dir)
     os.mkfifo(out_dir / "gyrostat.h")
-    code, _, err = cli(["generate", "--out", str(out_dir)])
+    code, _, err = cli(["generate", "--no-check", "--out", str(out_dir)])
     assert code == 1
     assert err == f"gyrogen: error: cannot write {out_dir / 'gyrostat.h'}: Not a regular file\n"
     assert _contents(out_dir) == old
@@ -138,7 +138,7 @@ def test_failed_rename_puts_every_old_file_back(
     old = _old_sources(out_dir)
     failing = out_dir / "gyrostat_ode.f90"
     _fail_on(monkeypatch, failing, PermissionError(13, "Permission denied"))
-    code, _, err = cli(["generate", "--out", str(out_dir)])
+    code, _, err = cli(["generate", "--no-check", "--out", str(out_dir)])
     assert code == 1
     assert err == f"gyrogen: error: cannot write {failing}: Permission denied\n"
     assert _contents(out_dir) == old
@@ -355,7 +355,7 @@ def test_full_disk_while_staging_leaves_no_temporary(
         return real_mkstemp(**kwargs)
 
     monkeypatch.setattr(files_module.tempfile, "mkstemp", mkstemp)
-    code, _, err = cli(["generate", "--out", str(out_dir)])
+    code, _, err = cli(["generate", "--no-check", "--out", str(out_dir)])
     assert code == 1 and made[2] == ".gyrostat_ode.h."
     assert (
         err
@@ -379,8 +379,8 @@ def test_written_files_have_the_mode_open_gives(
     alike; also where /proc/self/status does not tell the umask."""
     saved = os.umask(mask)
     try:
-        cli(["generate", "--out", str(tmp_path / "o")])
-        cli(["generate", "--out", str(tmp_path / "o")])  # replaces each file
+        cli(["generate", "--no-check", "--out", str(tmp_path / "o")])
+        cli(["generate", "--no-check", "--out", str(tmp_path / "o")])  # replaces each file
         cli(["new", "my_sat", "--out", str(tmp_path / "my_sat.toml")])
         monkeypatch.setattr(files_module, "_PROC_STATUS", tmp_path / "no_such_status")
         files_module._umask_once.cache_clear()
@@ -475,7 +475,7 @@ def test_missing_compiler_from_the_command_line(tmp_path: Path) -> None:
 
 
 def test_generate_lib_writes_build_files(tmp_path: Path, cli) -> None:
-    code, _, _ = cli(["generate", "--lib", "--out", str(tmp_path / "o")])
+    code, _, _ = cli(["generate", "--no-check", "--lib", "--out", str(tmp_path / "o")])
     assert code == 0
     names = {p.name for p in (tmp_path / "o").iterdir()}
     assert {"CMakeLists.txt", "gyrostat.mk", "gyrostat.c", "manifest.json"} <= names
@@ -708,6 +708,7 @@ def test_a_crlf_description_is_held_with_lf(tmp_path: Path, cli) -> None:
     assert manifest["scene"]["description"] == "two\nlines"
 
 
+@pytest.mark.slow  # a derivation and two cold builds in a cache of its own
 def test_verify_after_generate_derives_nothing_again(
     tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sources import write_sources
 
 from gyrogen.analysis.simulate import engine
-from gyrogen.codegen.generate import generate
 from gyrogen.errors import SceneError
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
@@ -55,7 +55,7 @@ def generated(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Scene]:
     """gyrostat with EVENTS, generated once for the module's tests."""
     scene = _scene("gyrostat")
     out = tmp_path_factory.mktemp("events")
-    generate(scene, out)
+    write_sources(scene, out)
     return out, scene
 
 
@@ -108,7 +108,7 @@ def test_the_header_says_events_on_the_states_are_searched_from_the_whole_step(
     """The header's promise follows the scene: pieces of at most an eighth
     of a step only where an event reads t."""
     scene = _scene("dual_spin", extra='[[events]]\nname = "tilted"\nexpr = "cos(q2) - 0.9"\n')
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     ode_h = " ".join((tmp_path / "dual_spin_ode.h").read_text().replace("*", " ").split())
     assert "from the whole step (the events read the states alone)" in ode_h
     assert "1/8 of the step" not in ode_h and "down to 2^-16 of the step" in ode_h
@@ -116,7 +116,7 @@ def test_the_header_says_events_on_the_states_are_searched_from_the_whole_step(
 
 def test_a_scene_without_events_has_no_event_function(tmp_path: Path) -> None:
     scene = _scene("dual_spin", extra="")
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     assert "_events" not in (tmp_path / "dual_spin.c").read_text()
     assert "events" not in scene.model_dump()  # its build id is as before events
 
@@ -134,7 +134,7 @@ name = "second_wheel"
 expr = "w2 - 100 + power[3]"
 """
     scene = _scene("rw4_pyramid", extra)
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     c_build = build.build(tmp_path, "c")
     rng = np.random.default_rng(2)
     xs = scene_view.random_states(scene, rng, 200)
@@ -197,7 +197,7 @@ def spin_up(tmp_path_factory: pytest.TempPathFactory) -> tuple[Compiled, Scene]:
     """The built-in wheel_spinup, generated and compiled once for its methods."""
     scene = parse(builtin_text("wheel_spinup"), "wheel_spinup.toml")
     out = tmp_path_factory.mktemp("wheel_spinup")
-    generate(scene, out)
+    write_sources(scene, out)
     return build.build(out, "c"), scene
 
 
@@ -248,7 +248,7 @@ def located(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Compiled], S
     t alone, and a terminal one where the spin angle q3 reaches 5 rad."""
     scene = _scene("dual_spin", LOCATED)
     out = tmp_path_factory.mktemp("located")
-    generate(scene, out)
+    write_sources(scene, out)
     return [build.build(out, lang) for lang in ("c", "fortran")], scene
 
 
@@ -438,7 +438,7 @@ name = "never"
 expr = "sqrt(u1 - 1000)"
 """
     scene = _scene("dual_spin", extra)
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     c_build = build.build(tmp_path, "c")
     x0, c = np.array(scene.initial_state()), c_build.setup([])
     _, log, _, code = c_build.integrate_events("taylor", x0, c, np.linspace(0.0, 5.0, 6))
@@ -642,12 +642,13 @@ def test_an_event_nan_where_the_state_makes_it_so_generates(tmp_path: Path, cli)
     ("events", "pieces"),
     [
         ('[[events]]\nname = "spun"\nexpr = "q3 - 5"\n', 1),
-        (
+        pytest.param(
             '[[events]]\nname = "slow"\nexpr = "u4 - 40"\n[[events]]\nname = "e"\n'
             'expr = "kinetic_energy - 1"\n',
             1,
+            marks=pytest.mark.slow,
         ),
-        (LOCATED, 8),
+        pytest.param(LOCATED, 8, marks=pytest.mark.slow),
         ('[[events]]\nname = "late"\nexpr = "q3 - t"\n', 8),
     ],
 )
@@ -697,7 +698,7 @@ def test_a_crossing_before_g_turns_nan_in_the_step_is_located(
     its pieces, for an event that reads t): the crossing is located (it was
     seen only where a step ended between the two), in C and Fortran alike."""
     scene = _scene("dual_spin", f'[[events]]\nname = "gone"\nexpr = "{expr}"\n')
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     builds = [build.build(tmp_path, lang) for lang in ("c", "fortran")]
     x0, c = np.array(scene.initial_state()), builds[0].setup([])
     for method in ADAPTIVE:
@@ -722,7 +723,7 @@ def test_a_crossing_after_g_turns_finite_in_the_step_is_located(
     was missed by every method but one that happened to end a step between
     the two)."""
     scene = _scene("dual_spin", f'[[events]]\nname = "born"\nexpr = "{expr}"\n')
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     builds = [build.build(tmp_path, lang) for lang in ("c", "fortran")]
     x0, c = np.array(scene.initial_state()), builds[0].setup([])
     for method in ADAPTIVE:
@@ -757,7 +758,7 @@ def test_a_batch_over_lanes_is_its_single_calls(tmp_path: Path, lanes: int) -> N
     terminal event on some lanes only, lanes that never fire, an event
     at t0 (q3 = 2 there: no crossing), a NaN start and logs that fill."""
     scene = _scene("dual_spin", ON_STATES)
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     header = next(tmp_path.glob("*_ode.h"))
     text = header.read_text()
     default = next(line for line in text.splitlines() if line.endswith("_LANES 8"))
@@ -809,7 +810,7 @@ def spinning(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Scene]:
     seconds (several periods of sin(3 t) too)."""
     scene = parse(builtin_text("wheel_spinup") + SPINNING, "spinning")
     out = tmp_path_factory.mktemp("spinning")
-    generate(scene, out)
+    write_sources(scene, out)
     return out, scene
 
 

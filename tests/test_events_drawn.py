@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
+from sources import write_sources
 
-from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
 from gyrogen.scene import Scene, builtin_text, parse
@@ -137,7 +137,7 @@ def _flat_near_zero(col: np.ndarray, at: np.ndarray, spread: float) -> bool:
 def drawn(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> tuple:
     scene, p = _draw(request.param)
     out = tmp_path_factory.mktemp(f"drawn{request.param}")
-    generate(scene, out)
+    write_sources(scene, out)
     return build.build(out, "c"), scene, p, *_judge(scene, p)
 
 

@@ -55,10 +55,10 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from sources import write_sources
 
 from gyrogen import abi, abi_groups, methods
 from gyrogen.analysis.check import stiffness
-from gyrogen.codegen.generate import generate
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import Scene, load
@@ -102,7 +102,7 @@ def built(tmp_path_factory: pytest.TempPathFactory, cache_dir: Path) -> dict[str
             src = REPO / "generated" / name
             if not src.is_dir():
                 src = tmp_path_factory.mktemp("quat") / name
-                generate(quaternion_twin(), src)
+                write_sources(quaternion_twin(), src)
             out[name] = build.build(src, "c")
         return out
     finally:

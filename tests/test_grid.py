@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sources import write_sources
 
 from gyrogen import abi, methods
-from gyrogen.codegen.generate import generate
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.scene import builtin_text, default, parse
@@ -287,7 +287,7 @@ def test_euler_parameters_on_the_grid(tmp_path: Path, cache_dir: Path) -> None:
     """Euler parameters between step ends are the interpolant's: |e| = 1 to
     within the tolerance's scale; at the end, projected, as _integrate's."""
     scene = parse(QUATERNION_SPINUP, "wheel_spinup_e")
-    generate(scene, tmp_path / scene.name)
+    write_sources(scene, tmp_path / scene.name)
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     try:

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from sources import write_sources
 
 from gyrogen import abi, methods, tableaus
-from gyrogen.codegen.generate import generate
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build, flags
 from gyrogen.runtime.compiled import Compiled
@@ -192,7 +192,7 @@ def test_time_dependent_torque(tmp_path: Path, cache_dir: Path) -> None:
     difference). The table's kinks cost every method accuracy (scipy's RK45
     as much), so the reference integrates piece by piece."""
     scene = tabled(SMOOTH_ONLY_OUT)
-    generate(scene, tmp_path / "tabled")
+    write_sources(scene, tmp_path / "tabled")
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     try:
@@ -472,7 +472,7 @@ def test_rodas4_lanes_equal_single_calls(compiled: Get, tmp_path: Path, cache_di
     and code equal rodas4's on it alone, bit for bit, on a quaternion scene
     and under a tabled torque (f_t over lanes), with a NaN start and a step
     budget that some states exhaust."""
-    generate(tabled(["rodas4"]), tmp_path / "tabled")
+    write_sources(tabled(["rodas4"]), tmp_path / "tabled")
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     try:
@@ -671,7 +671,7 @@ def test_strict_builds(integrators: list[str] | None, tmp_path: Path) -> None:
         src = REPO / "generated" / "gyrostat"
     else:
         src = tmp_path / "src"
-        generate(tabled(integrators), src)
+        write_sources(tabled(integrators), src)
     name = next(src.glob("*_ode.c")).name[: -len("_ode.c")]
     for cc in STRICT_C:
         _run([*cc, "-c", f"{name}_ode.c", "-o", str(tmp_path / "ode.o")], src)

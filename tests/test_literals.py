@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sm
+from sources import write_sources
 
-from gyrogen.codegen.generate import generate
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.statements import expression, symbol_names
 from gyrogen.oracle import scene_view
@@ -132,7 +132,7 @@ T = 0.0
 @pytest.mark.slow
 def test_folded_decimals_compile_everywhere_and_hold_momentum(tmp_path: Path) -> None:
     scene = parse(FOLDED_DECIMALS, "folded_decimals.toml")
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     for name in ("folded_decimals.c", "folded_decimals.f90"):
         text = (tmp_path / name).read_text()
         assert not re.search(r"(?<![\d.e])\d{11,}(?![\d.])", text), (

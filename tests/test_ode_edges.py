@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from sources import write_sources
 
 from gyrogen import abi, methods
-from gyrogen.codegen.generate import generate
 from gyrogen.oracle import reference, scene_view
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
@@ -64,7 +64,7 @@ def euler_parameters(
 ) -> Iterator[dict[str, Compiled]]:
     """The same scene with Euler parameters for the attitude."""
     src = tmp_path_factory.mktemp("quat") / "torque_free_quat"
-    generate(quaternion_twin(), src)
+    write_sources(quaternion_twin(), src)
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     yield {lang: build.build(src, lang) for lang in LANGUAGES}

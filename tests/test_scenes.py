@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sources import write_sources
 from wide import WIDE
 
 from gyrogen.abi_groups import MAX_START_ANGLE
@@ -325,7 +326,7 @@ def test_torque_free_principal_scene_meets_the_op_goal() -> None:
 @pytest.mark.slow
 def test_c_only_scene_builds_no_fortran(tmp_path: Path) -> None:
     scene = parse(edit('targets = ["c", "fortran"]', 'targets = ["c"]'), "c_only.toml")
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     assert not list(tmp_path.glob("*.f90"))
     with pytest.raises(BuildError, match="has no fortran target"):
         build.build(tmp_path, "fortran")
@@ -335,7 +336,7 @@ def test_c_only_scene_builds_no_fortran(tmp_path: Path) -> None:
 @pytest.mark.parametrize("name", builtin_names())
 def test_builtin_scene_matches_the_reference(name: str, tmp_path: Path) -> None:
     scene = load(name)
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     backends = [build.build(tmp_path, lang) for lang in scene.targets]
     report = compare(backends, scene, n_states=500, n_params=5, n_ill=2, seed=3)
     assert report.passed, [r for r in report.rows if not r.passed] + report.refusal_failures
@@ -354,7 +355,7 @@ def test_table_torque_scene_matches_the_reference(tmp_path: Path) -> None:
     scene = parse(
         edit('T   = "runtime"   # N m\n', "", text).replace("parameters = { T = 0.02 }", ""), "t"
     )
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     backends = [build.build(tmp_path, lang) for lang in scene.targets]
     report = compare(backends, scene, n_states=300, n_params=1, n_ill=0, seed=4)
     assert report.passed, report.rows
@@ -396,7 +397,7 @@ def test_folded_masses_scene_matches_the_reference(tmp_path: Path) -> None:
     """The reduced mass is a number here: setup multiplies the lumped sums out
     in exact rationals, and both languages take the literals."""
     scene = parse(FOLDED_MASSES, "folded_masses.toml")
-    generate(scene, tmp_path)
+    write_sources(scene, tmp_path)
     backends = [build.build(tmp_path, lang) for lang in scene.targets]
     report = compare(backends, scene, n_states=300, n_params=3, n_ill=1, seed=5)
     assert report.passed, [r for r in report.rows if not r.passed] + report.refusal_failures

@@ -17,9 +17,10 @@ from hypothesis import HealthCheck, Phase, assume, given, settings
 from hypothesis import strategies as st
 from scene_space import scenes
 from scipy import integrate
+from sources import write_sources
 
 from gyrogen.codegen.context import make_context
-from gyrogen.codegen.generate import generate, unit_of
+from gyrogen.codegen.generate import unit_of
 from gyrogen.codegen.manifest import manifest
 from gyrogen.errors import SceneError, SetupRefused
 from gyrogen.runtime import build
@@ -133,7 +134,7 @@ TOL = 1e-13
 def built(tmp: Path, cache: Path, text: str, languages=("c", "fortran")) -> dict[str, Compiled]:
     """The scene's sources generated into tmp and built per language."""
     scene = parse(text, "scene.toml")
-    generate(scene, tmp)
+    write_sources(scene, tmp)
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache))
     try:
@@ -481,7 +482,7 @@ def test_drawn_scenes_against_finite_differences(drawn, pick, tmp_path_factory, 
     data["sensitivities"] = {"wrt": ["state", *params]}
     scene = validate(data, "drawn.toml")
     out = tmp_path_factory.mktemp("drawn") / scene.name
-    generate(scene, out)
+    write_sources(scene, out)
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     try:

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sm
+from sources import write_sources
 from test_integrators import tabled  # the wheel under a tabled torque
 
 from gyrogen import abi, methods
@@ -352,12 +353,11 @@ def test_a_scene_with_only_the_taylor_method(tmp_path: Path, cache_dir: Path) ->
     """Its lanes define their own sin and cos (no pair's rhs_lanes brings
     them), it compiles under generate's strict check, its batch equals its
     single calls, and auto picks it rather than scipy."""
-    from gyrogen.codegen.generate import generate
 
     data = load("torque_free").model_dump()
     data.update(name="only_taylor", integrators=["taylor"])
     scene = Scene.model_validate(data)
-    generate(scene, tmp_path / "src")
+    write_sources(scene, tmp_path / "src")
     mp = pytest.MonkeyPatch()
     mp.setenv("GYROGEN_CACHE", str(cache_dir))
     try:
