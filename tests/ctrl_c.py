@@ -1,6 +1,7 @@
 """gyrogen in a process of its own, sent a real SIGINT (a terminal's Ctrl-C)
-at a moment chosen inside it: when the first file into a given directory is
-about to be written, or when a sweep's first task has begun. A moment no
+at a moment chosen inside it: when the first file into a given directory
+(or the first after a given number) is about to be written, or when a
+sweep's first task has begun. A moment no
 timing from outside hits every time."""
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from gyrogen import files
 from gyrogen.cli import main
 
 signal.signal(signal.SIGINT, signal.default_int_handler)  # as a terminal's process has it
-at, sent = sys.argv[1], []
+at, after, sent, seen = sys.argv[1], int(sys.argv[2]), [], []
 
 
 def ctrl_c():
@@ -31,7 +32,9 @@ stage = files._stage
 
 def staged(target, data):
     if str(target.parent) == at:
-        ctrl_c()
+        seen.append(target)
+        if len(seen) > after:
+            ctrl_c()
     return stage(target, data)
 
 
@@ -46,17 +49,17 @@ if at == "task":
     from gyrogen.analysis.sweep import engine
 
     chunk_task, engine.chunk_task = engine.chunk_task, task
-sys.argv = ["gyrogen", *sys.argv[2:]]
+sys.argv = ["gyrogen", *sys.argv[3:]]
 main()
 """
 
 
-def interrupted(at: Path | str, argv: list[str], cache: Path) -> tuple[int, str]:
+def interrupted(at: Path | str, argv: list[str], cache: Path, after: int = 0) -> tuple[int, str]:
     """gyrogen argv in a new process, interrupted as the first file into the
-    directory at is staged (at "task": as a sweep's first task begins); its
-    exit code and stderr."""
+    directory at after `after` of them is staged (at "task": as a sweep's
+    first task begins); its exit code and stderr."""
     env = {**os.environ, "GYROGEN_CACHE": str(cache)}
-    proc = subprocess.run([sys.executable, "-c", CHILD, str(at), *argv], env=env,
+    proc = subprocess.run([sys.executable, "-c", CHILD, str(at), str(after), *argv], env=env,
                           capture_output=True, text=True, timeout=300)  # fmt: skip
     return proc.returncode, proc.stderr
 

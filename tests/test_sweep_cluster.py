@@ -18,6 +18,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from ctrl_c import interrupted
 from sweep_cases import long, rows
 
 from gyrogen.runtime.scene_build import builds
@@ -169,22 +170,15 @@ def _build_id(out: Path) -> str:
 
 
 def test_interrupted_client_resumes_without_recomputing(tmp_path: Path, cache: Path, cli) -> None:
+    """Ctrl-C as the sweep stages its third part (a moment chosen inside the
+    process: one timed from outside came after the sweep's end under load):
+    exit 130; a rerun computes only the chunks not written, and its rows are
+    a fresh run's."""
     sweep = long(tmp_path / "long.toml")
     out, parts = tmp_path / "out", tmp_path / "out" / "parts"
     cmd = [sys.executable, "-m", "gyrogen", "sweep", str(sweep), "--out", str(out)]
-    proc = subprocess.Popen(
-        [*cmd, "--workers", "1", "--quiet", "--no-plots"],
-        env=_environment(cache),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and len(list(parts.glob("part-*"))) < 2:
-        time.sleep(0.01)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
+    code, err = interrupted(parts, [*cmd[3:], "--workers", "1", "--quiet", "--no-plots"], cache, 2)
+    assert code == 130, err
     assert err.rstrip().endswith("gyrogen: aborted")
     before = {p.name: p.stat().st_mtime_ns for p in parts.glob("part-*.parquet")}
     assert 2 <= len(before) < CHUNKS
