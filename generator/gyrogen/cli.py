@@ -59,10 +59,10 @@ def main(argv: list[str] | None = None) -> None:
     stop, and the interpreter's exit prints no traceback). Called with argv
     (tests, in process), it puts the SIGINT handler back as it found it."""
     _caught.clear()
-    previous = _install(_interrupted)
+    ended: SystemExit | None = None
     hook = sys.unraisablehook
     sys.unraisablehook = _unraisable(hook)
-    ended: SystemExit | None = None
+    previous = _install(_interrupted)  # last before the try: a Ctrl-C from here on is handled
     try:
         from gyrogen.files import transaction  # the standard library's only
 
