@@ -67,7 +67,7 @@ def main(repeats: int) -> None:
             print(f"| {name} | taylor not offered (rhs not smooth) |||||||")
             continue
         with tempfile.TemporaryDirectory() as tmp:
-            _, built = build_scene(scene, Path(tmp), ("c",))
+            built = build_scene(scene, Path(tmp), ("c",))
         comp = built["c"]
         c = comp.setup(runtime_values(scene))
         x0, t1 = np.array(scene.initial_state()), scene.simulate.t_end

@@ -49,7 +49,7 @@ def watched(scene: Scene, t1: float, tol: float) -> Scene:
     what its quantity sweeps over 0..t1 (read from a grid of the plain
     scene's run)."""
     with tempfile.TemporaryDirectory(prefix="gyrogen-events-") as tmp:
-        _, built = build_scene(scene, Path(tmp), ("c",))
+        built = build_scene(scene, Path(tmp), ("c",))
     comp = built["c"]
     c = comp.setup(runtime_values(scene))
     times = np.linspace(0.0, t1, 2001)
@@ -108,7 +108,7 @@ def main() -> None:
     args = ap.parse_args()
     scene = watched(default(), args.t1, args.tol)
     with tempfile.TemporaryDirectory(prefix="gyrogen-events-") as tmp:
-        _, built = build_scene(scene, Path(tmp), ("c",))
+        built = build_scene(scene, Path(tmp), ("c",))
     comp = built["c"]
     c = comp.setup(runtime_values(scene))
     x0 = np.array(scene.initial_state())

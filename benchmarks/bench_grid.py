@@ -332,7 +332,7 @@ def main() -> None:
     args = ap.parse_args()
     scene = default()
     with tempfile.TemporaryDirectory(prefix="gyrogen-grid-") as tmp:
-        _, built = build_scene(scene, Path(tmp), ("c",))
+        built = build_scene(scene, Path(tmp), ("c",))
     comp = built["c"]
     c = comp.setup(runtime_values(scene))
     x0 = np.array(scene.initial_state())

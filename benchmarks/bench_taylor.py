@@ -58,7 +58,7 @@ class Raw:
 def main(name: str, repeats: int, base: Path | None = None) -> None:
     scene = load(name)
     with tempfile.TemporaryDirectory() as tmp:
-        _, built = build_scene(scene, Path(tmp), ("c",))
+        built = build_scene(scene, Path(tmp), ("c",))
     comp = built["c"]
     c = comp.setup(runtime_values(scene))
     x0, t1 = np.array(scene.initial_state()), scene.simulate.t_end

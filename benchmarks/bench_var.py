@@ -65,7 +65,7 @@ def builds(where: Path) -> Builds:
     """The default scene with Phi, its error measured with x or not."""
     out = {}
     for error in ("all", "state"):
-        _, built = build_scene(parse(scene_text(error), "gyrostat.toml"), where / error, ["c"])
+        built = build_scene(parse(scene_text(error), "gyrostat.toml"), where / error, ["c"])
         out[error] = built["c"]
     return out
 

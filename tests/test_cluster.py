@@ -184,7 +184,7 @@ def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
     n: int, tmp_path: Path
 ) -> None:
     scene = parse(random_cluster(np.random.default_rng(100 + n), n), f"random{n}")
-    _, backends = build_scene(scene, tmp_path / "gen", ["c"])
+    backends = build_scene(scene, tmp_path / "gen", ["c"])
     c_code = backends["c"]
     report = compare([c_code], scene, n_states=200, n_params=1, n_ill=0)
     assert report.passed, report.rows
@@ -252,7 +252,7 @@ def test_the_jacobian_is_not_compared_across_a_torque_clamp(tmp_path: Path) -> N
         "axis = [0.577350269189626, 0.0, 0.816496580927726]", "axis = [1.0, 0.0, 0.0]", 1
     )
     scene = parse(text.replace('name = "rw4_pyramid"', 'name = "rw4_a1"'), "rw4_a1.toml")
-    _, backends = build_scene(scene, tmp_path / "gen", ["c"])
+    backends = build_scene(scene, tmp_path / "gen", ["c"])
     b = backends["c"]
     p = np.array([scene.simulate.parameters[n] for n in scene.runtime])
     x = np.zeros(len(scene.states))

@@ -33,7 +33,7 @@ AXES = {n: v for n, v in NOMINAL.items() if n[0] == "g"}
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Scene, dict[Language, Compiled]]:
     scene = load("rw4_hardware")
-    _, backends = build_scene(scene, tmp_path_factory.mktemp("axes"), ["c", "fortran"])
+    backends = build_scene(scene, tmp_path_factory.mktemp("axes"), ["c", "fortran"])
     return scene, backends
 
 
@@ -85,7 +85,7 @@ def test_at_the_folded_values_it_is_the_folded_scene(
     """With p at rw4_pyramid's values (axes as the scene writes them, 15
     digits), rhs and outputs equal its own build's to rounding."""
     scene, backends = built
-    _, theirs = build_scene(load("rw4_pyramid"), tmp_path / "folded", [language])
+    theirs = build_scene(load("rw4_pyramid"), tmp_path / "folded", [language])
     rng = np.random.default_rng(4)
     xs = rng.normal(size=(200, len(scene.states)))
     xs[:, -4:] = rng.uniform(-300, 300, (200, 4))

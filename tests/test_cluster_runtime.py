@@ -51,7 +51,7 @@ NOMINAL = {**CARRIER, **{f"{key}_{k}": v for k in range(1, 5) for key, v in WHEE
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Scene, dict[Language, Compiled]]:
     scene = parse(TEXT, "rw4_runtime.toml")
-    _, backends = build_scene(scene, tmp_path_factory.mktemp("runtime"), ["c", "fortran"])
+    backends = build_scene(scene, tmp_path_factory.mktemp("runtime"), ["c", "fortran"])
     return scene, backends
 
 
@@ -86,7 +86,7 @@ def test_at_the_folded_values_it_is_the_folded_scene(
     """With p at rw4_pyramid's values, rhs and outputs equal its own build's
     to rounding (that build, folded, keeps its bytes: make check-generated)."""
     scene, backends = built
-    _, theirs = build_scene(load("rw4_pyramid"), tmp_path / "folded", [language])
+    theirs = build_scene(load("rw4_pyramid"), tmp_path / "folded", [language])
     rng = np.random.default_rng(3)
     xs = rng.normal(size=(200, len(scene.states)))
     xs[:, -4:] = rng.uniform(-300, 300, (200, 4))
@@ -198,7 +198,7 @@ def test_random_axes_with_everything_runtime(tmp_path: Path) -> None:
         + f"[simulate]\nparameters = {{ {sim} }}\n"
     )  # fmt: skip
     scene = parse(text, "rw6_random.toml")
-    _, backends = build_scene(scene, tmp_path / "gen", ["c"])
+    backends = build_scene(scene, tmp_path / "gen", ["c"])
     report = compare([backends["c"]], scene, n_states=500, n_params=5, n_ill=0)
     assert report.passed and not report.refusal_failures, report.rows
 

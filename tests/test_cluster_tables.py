@@ -75,7 +75,7 @@ TIMES = (-1.0, 0.0, 0.25, 0.5, 0.6, 1.0, 1.7, 2.0, 3.0, 5.5, 6.0, 10.0)
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Scene, dict[Language, Compiled]]:
     scene = parse(TEXT, "rw3_tables.toml")
-    _, backends = build_scene(scene, tmp_path_factory.mktemp("tables"), ["c", "fortran"])
+    backends = build_scene(scene, tmp_path_factory.mktemp("tables"), ["c", "fortran"])
     return scene, backends
 
 

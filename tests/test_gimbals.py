@@ -336,7 +336,7 @@ def test_cmg_scenes_match_the_gimbal_reference(text: str, tmp_path: Path) -> Non
     from gyrogen.runtime.scene_build import build_scene
 
     scene = parse(text, "scene.toml")
-    _, backends = build_scene(scene, tmp_path, scene.targets, lambda _: None)
+    backends = build_scene(scene, tmp_path, scene.targets)
     report = compare(list(backends.values()), scene, n_states=500, n_params=5, n_ill=0, seed=5)
     assert report.passed, [r for r in report.rows if not r.passed] + report.refusal_failures
     assert {"C vs reference", "Fortran vs reference", "C vs reference power"} <= {

@@ -12,6 +12,7 @@ import pytest
 
 from gyrogen.analysis.bench import heyoka_peer
 from gyrogen.analysis.simulate.engine import runtime_values
+from gyrogen.codegen.generate import unit_of
 from gyrogen.oracle.compare import scaled_error
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_scene
@@ -21,7 +22,8 @@ from gyrogen.scene import default, load
 def _scene(name: str, tmp: Path, cache: Path, mp: pytest.MonkeyPatch) -> tuple[Compiled, ...]:
     mp.setenv("GYROGEN_CACHE", str(cache))
     scene = default() if name == "gyrostat" else load(name)
-    unit, built = build_scene(scene, tmp / name, ("c",))
+    built = build_scene(scene, tmp / name, ("c",))
+    unit = unit_of(scene)
     comp = built["c"]
     return comp, unit, comp.setup(runtime_values(scene)), np.array(scene.initial_state()), scene
 

@@ -64,7 +64,7 @@ TOL = {"rtol": 1e-9, "atol": 1e-9}
 @pytest.fixture(scope="module")
 def pulse(tmp_path_factory: pytest.TempPathFactory) -> tuple[Scene, dict[str, Compiled]]:
     scene = parse(TEXT, "pulse")
-    _, comps = build_scene(scene, Path(tmp_path_factory.mktemp("pulse")), ["c", "fortran"])
+    comps = build_scene(scene, Path(tmp_path_factory.mktemp("pulse")), ["c", "fortran"])
     return scene, dict(comps)
 
 

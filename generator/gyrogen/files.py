@@ -10,6 +10,7 @@ of a command puts back every file and removes every directory it wrote.
 from __future__ import annotations
 
 import itertools
+import json
 import os
 import signal
 import stat
@@ -21,7 +22,7 @@ from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
 
-from gyrogen.errors import GyrogenError
+from gyrogen.errors import GyrogenError, SceneError
 
 NEW_FILE_MODE = 0o666
 """What open(path, "w") asks for a new file; the umask takes its bits away."""
@@ -305,3 +306,17 @@ def _remove(paths: Iterable[Path]) -> None:
     for path in paths:
         with suppress(OSError):
             path.unlink(missing_ok=True)
+
+
+def claim(out: Path, prefix: str) -> None:
+    """Refuse out when it holds another scene's sources (its manifest.json
+    names another prefix): two scenes' files never mix in one directory."""
+    try:
+        held = json.loads((out / "manifest.json").read_text(encoding="utf-8")).get("prefix")
+    except (OSError, ValueError, AttributeError):
+        return  # no manifest (or none of gyrogen's): nothing to mix with
+    if isinstance(held, str) and held != prefix:
+        raise SceneError(
+            f"{out} holds the sources of scene {held!r} (its manifest.json): writing {prefix!r} "
+            "there would mix two scenes' files; give another --out"
+        )

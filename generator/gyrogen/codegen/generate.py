@@ -10,8 +10,7 @@ from gyrogen.codegen import buildfiles
 from gyrogen.codegen.backends import c, fortran
 from gyrogen.codegen.context import SceneContext, make_context
 from gyrogen.codegen.manifest import manifest
-from gyrogen.errors import SceneError
-from gyrogen.files import write_atomic
+from gyrogen.files import claim, write_atomic
 from gyrogen.scene import Scene
 from gyrogen.scene import default as default_scene
 from gyrogen.symbolic.literals import LiteralError
@@ -63,20 +62,6 @@ def unit_of(scene: Scene) -> SceneContext:
     for old in list(_UNITS)[:-UNITS_KEPT]:
         _UNITS.pop(old, None)
     return unit
-
-
-def claim(out: Path, prefix: str) -> None:
-    """Refuse out when it holds another scene's sources (its manifest.json
-    names another prefix): two scenes' files never mix in one directory."""
-    try:
-        held = json.loads((out / "manifest.json").read_text(encoding="utf-8")).get("prefix")
-    except (OSError, ValueError, AttributeError):
-        return  # no manifest (or none of gyrogen's): nothing to mix with
-    if isinstance(held, str) and held != prefix:
-        raise SceneError(
-            f"{out} holds the sources of scene {held!r} (its manifest.json): writing {prefix!r} "
-            "there would mix two scenes' files; give another --out"
-        )
 
 
 def generate(scene: Scene, out: Path, lib: bool = False) -> SceneContext:

@@ -62,7 +62,7 @@ def check(
         for case in progress("checking", suite):
             key = build_id(case.scene)
             if key not in compiled and not case.refused_by:
-                _, built = build_scene(case.scene, Path(tmp) / key, ["c"])
+                built = build_scene(case.scene, Path(tmp) / key, ["c"])
                 compiled[key] = built["c"]
             res = engine.run_case(case, compiled.get(key))
             results.append(res)

@@ -72,7 +72,7 @@ def _by_stiffness(scene: Scene, explicit: str) -> str:
     from gyrogen.runtime.scene_build import build_scene
 
     with tempfile.TemporaryDirectory(prefix="gyrogen-fmu-") as tmp:
-        _, built = build_scene(scene, Path(tmp) / scene.name, ["c"])
+        built = build_scene(scene, Path(tmp) / scene.name, ["c"])
     comp = built["c"]
     c = given_constants(scene, comp, np.array(runtime_values(scene)))
     choice = stiffness.choose(comp, c, np.array(scene.initial_state()), scene.simulate.t_end)

@@ -62,9 +62,9 @@ def generate(
     --no-check skips this. With several scenes, every one is rendered and
     checked before any is written."""
     from gyrogen.codegen import buildfiles
-    from gyrogen.codegen.generate import claim, render_all, unit_of
+    from gyrogen.codegen.generate import render_all, unit_of
     from gyrogen.errors import SceneError
-    from gyrogen.files import can_write, transaction, write_atomic
+    from gyrogen.files import can_write, claim, transaction, write_atomic
     from gyrogen.oracle.compare import check_rendered
     from gyrogen.runtime.scene_build import keep_sources
 

@@ -29,8 +29,7 @@ def verify_scene(
     passed. The sources are the ones scene_sources renders, or keeps from
     the last render of this scene by this gyrogen and sympy (`gyrogen
     generate`'s, a sweep's): the same bytes, without deriving again."""
-    from gyrogen.codegen.generate import claim
-    from gyrogen.files import write_atomic
+    from gyrogen.files import claim, write_atomic
     from gyrogen.runtime.scene_build import build_dir, scene_sources
 
     claim(directory, scene.name)

@@ -22,25 +22,21 @@ import json
 import os
 import tempfile
 import threading
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import suppress
 from dataclasses import dataclass
 from functools import cache, cached_property
 from importlib.metadata import version
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import gyrogen
 from gyrogen.errors import GyrogenError
-from gyrogen.files import write_atomic
+from gyrogen.files import claim, write_atomic
 from gyrogen.runtime.build import Halt, build
 from gyrogen.runtime.cache import cache_dir
 from gyrogen.runtime.compiled import Compiled, Language
 from gyrogen.scene import Scene
-
-if TYPE_CHECKING:
-    from gyrogen.codegen.context import SceneContext
 
 
 @dataclass(frozen=True)
@@ -152,19 +148,16 @@ def build_files(
 
 
 def build_scene(
-    scene: Scene,
-    directory: Path,
-    languages: Iterable[Language],
-    written: Callable[[SceneContext], None] = lambda unit: None,
-) -> tuple[SceneContext, dict[Language, Compiled]]:
-    """Render scene into directory (all or nothing), call written with its
-    unit, then build the languages (or fetch them from the cache):
-    the unit and the backends by language."""
-    from gyrogen.codegen.generate import generate  # sympy
-
-    unit = generate(scene, directory)
-    written(unit)
-    return unit, build_dir(directory, languages)
+    scene: Scene, directory: Path, languages: Iterable[Language]
+) -> dict[Language, Compiled]:
+    """The scene's sources (scene_sources: from the cache when rendered
+    before, so a scene is derived once) written into directory, all or
+    nothing, then built per language (or fetched from the cache): the
+    backends by language. A directory that holds another scene's sources is
+    refused (files.claim)."""
+    claim(directory, scene.name)
+    write_atomic(directory, scene_sources(scene).files)
+    return build_dir(directory, languages)
 
 
 _BUILT: dict[str, Compiled] = {}

@@ -46,7 +46,7 @@ def problem(directory: Path | None = None) -> Problem:
     """The default scene built in C (into directory, else a temporary one)."""
     scene = default()
     with tempfile.TemporaryDirectory(prefix="gyrogen-ens-") as tmp:
-        _, backends = build_scene(scene, Path(directory or tmp), ("c",))
+        backends = build_scene(scene, Path(directory or tmp), ("c",))
     comp = backends["c"]
     p = runtime_values(scene)
     x0 = np.array(scene.initial_state())

@@ -244,7 +244,7 @@ def run(
     inp = _Inputs(p=p, x=xs[0].copy(), xs=xs)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="gyrogen-bench-") as tmp:
-        _, backends = build_scene(default(), Path(tmp), ("c", "fortran"))
+        backends = build_scene(default(), Path(tmp), ("c", "fortran"))
     echo(f"generated and built the default scene in {time.perf_counter() - t0:.1f} s")
     ms: list[Measurement] = []
     for comp in backends.values():

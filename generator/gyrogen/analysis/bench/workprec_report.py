@@ -51,7 +51,7 @@ def check_scene(scene: Scene) -> np.ndarray:
 def problem(scene: Scene, src: Path, cfg: Config) -> Problem:
     p = check_scene(scene)
     wanted: tuple[Language, ...] = ("c", "fortran") if cfg.fortran else ("c",)
-    _, built = build_scene(scene, src, [lang for lang in wanted if lang in scene.targets])
+    built = build_scene(scene, src, [lang for lang in wanted if lang in scene.targets])
     compiled = {_LABELS[lang]: comp for lang, comp in built.items()}
     x0 = np.array(scene.initial_state())
     c = given_constants(scene, compiled["C"], p)

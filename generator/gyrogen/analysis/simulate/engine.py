@@ -270,7 +270,7 @@ def run(
     the sources, kept beside the trajectory they made, in out/src), all at
     the end: a refused scene or parameter set, a failed run or anything in
     the way (checked before any work) leaves nothing behind."""
-    from gyrogen.codegen.generate import claim
+    from gyrogen.files import claim
 
     p = runtime_values(scene)  # first: a scene error must leave nothing behind
     names = files.file_names(settings.plot, bool(scene.events))
