@@ -1,7 +1,7 @@
 """A scene's sources written for a test whose subject is what they compute,
 not how they are rendered: generate's files (without --lib's), taken from
 the build cache's sources/ when this gyrogen's code and sympy rendered the
-same scene before (runtime/scene_build.scene_sources, keyed by all three),
+same scene before (runtime/scene_build.write_scene, keyed by all three),
 so that a rerun of the suite does not derive the scene again. The tests of
 generate itself call codegen.generate.generate."""
 
@@ -9,12 +9,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gyrogen.files import write_atomic
-from gyrogen.runtime.scene_build import scene_sources
+from gyrogen.runtime.scene_build import write_scene
 from gyrogen.scene import Scene
 
 
 def write_sources(scene: Scene, out: Path) -> Path:
     """scene's sources written into out, all or nothing (as generate does); out."""
-    write_atomic(out, scene_sources(scene).files)
+    write_scene(scene, out)
     return out

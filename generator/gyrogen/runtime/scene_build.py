@@ -147,16 +147,21 @@ def build_files(
         return build_dir(Path(tmp), languages, portable)
 
 
+def write_scene(scene: Scene, directory: Path) -> None:
+    """The scene's sources (scene_sources: from the cache when rendered
+    before, so a scene is derived once) written into directory, all or
+    nothing; a directory that holds another scene's sources is refused
+    (files.claim)."""
+    claim(directory, scene.name)
+    write_atomic(directory, scene_sources(scene).files)
+
+
 def build_scene(
     scene: Scene, directory: Path, languages: Iterable[Language]
 ) -> dict[Language, Compiled]:
-    """The scene's sources (scene_sources: from the cache when rendered
-    before, so a scene is derived once) written into directory, all or
-    nothing, then built per language (or fetched from the cache): the
-    backends by language. A directory that holds another scene's sources is
-    refused (files.claim)."""
-    claim(directory, scene.name)
-    write_atomic(directory, scene_sources(scene).files)
+    """write_scene, then the sources built per language (or fetched from
+    the cache): the backends by language."""
+    write_scene(scene, directory)
     return build_dir(directory, languages)
 
 
