@@ -9,7 +9,7 @@ import fcntl
 import io
 import os
 import subprocess
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -38,6 +38,16 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     cache = shared_dir(tmp_path_factory) / "cache"
     cache.mkdir(exist_ok=True)
     return cache
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _run_cache(cache_dir: Path) -> Iterator[None]:
+    """GYROGEN_CACHE is the run's build cache for every test and every
+    process a test starts: the suite never builds into the user's own cache
+    (~/.cache/gyrogen), and `make test-fast` keeps all it built."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("GYROGEN_CACHE", str(cache_dir))
+        yield
 
 
 @pytest.fixture(scope="session")

@@ -137,6 +137,54 @@ def test_running_compiled_code_never_imports_sympy() -> None:
     assert proc.stdout.strip() == "False", proc.stderr
 
 
+def test_the_rendering_digest_reads_every_module_rendering_imports() -> None:
+    """The rendered sources are cached under a digest of the modules
+    rendering can import (runtime/scene_build.py reads them from each file's
+    import lines with a pattern): every module the syntax tree says those
+    import, at any depth, is digested, each enclosing package too."""
+    from gyrogen.runtime.scene_build import RENDERING, imported
+
+    graph = {name_of(p): imports(p) for p in modules()}
+    reached, todo = set(RENDERING), list(RENDERING)
+    while todo:
+        for m in graph[todo.pop()] - reached:
+            reached.add(m)
+            todo.append(m)
+    for m in list(reached):
+        while "." in m:
+            m = m.rpartition(".")[0]
+            reached.add(m)
+    digested = {name_of(p) for p in imported(PACKAGE, RENDERING)}
+    assert reached == digested, (reached - digested, digested - reached)
+
+
+def test_rendering_loads_no_module_its_digest_leaves_out() -> None:
+    """A new interpreter renders a scene with events, outputs and
+    sensitivities: every gyrogen module loaded by then is one the rendering
+    digest reads (an edit elsewhere keeps the rendered sources cached)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from gyrogen.scene import parse, builtin_text\n"
+        "from gyrogen.codegen.generate import render_all, unit_of\n"
+        "from gyrogen.codegen.context import build_id\n"
+        "scene = parse(builtin_text('torque_free') + '[[events]]\\nname = \"e\"\\n'\n"
+        "              'expr = \"u1 - 0.1\"\\n[sensitivities]\\nwrt = [\"state\"]\\n', 'x')\n"
+        "render_all(unit_of(scene)); build_id(scene)\n"
+        "print(' '.join(sorted(m for m in sys.modules if m.startswith('gyrogen'))))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    from gyrogen.runtime.scene_build import RENDERING, imported
+
+    digested = {name_of(p) for p in imported(PACKAGE, RENDERING)}
+    loaded = set(proc.stdout.split())
+    assert "gyrogen.symbolic.variational" in loaded and "gyrogen.cli" not in loaded
+    assert loaded <= digested, sorted(loaded - digested)
+
+
 def test_the_adaptive_loops_share_the_driver() -> None:
     """The stop codes of the adaptive loops, their step counts, the last
     step's slack and the controllers' floors are written in

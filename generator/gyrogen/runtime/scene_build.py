@@ -8,8 +8,9 @@ scene is rendered: a process that builds sources it was handed (a sweep's
 worker) or found in the cache never imports sympy.
 
 The rendered sources are cached under the build cache's sources/, keyed by
-the scene, the sympy version and a digest of gyrogen's own code and
-templates, so a rerun skips the derivation. Built sources are written into
+the scene, the sympy version and a digest of the code that renders it (the
+modules rendering imports, and the templates), so a rerun skips the
+derivation, and so does a run after an edit to the rest of gyrogen. Built sources are written into
 a directory of their own first (runtime/build.py copies them into its cache
 entry, keyed by their bytes and the flags), so two processes building the
 same sources never share a half-written directory.
@@ -20,6 +21,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import tempfile
 import threading
 from collections.abc import Iterable, Mapping
@@ -77,10 +79,65 @@ def code_digest() -> str:
     return h.hexdigest()[:16]
 
 
+RENDERING = ("gyrogen.codegen.generate", "gyrogen.codegen.context")
+"""Where rendering starts (scene_sources imports these two)."""
+
+_IMPORT = re.compile(
+    r"^[ \t]*(?:from[ \t]+(gyrogen[\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n]*)"
+    r"|import[ \t]+(gyrogen[\w.]*))",
+    re.MULTILINE,
+)
+
+
+def _module_file(root: Path, module: str) -> Path | None:
+    path = root.joinpath(*module.split(".")[1:])
+    for candidate in (path / "__init__.py", path.with_suffix(".py")):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def imported(root: Path, start: Iterable[str]) -> list[Path]:
+    """The files of gyrogen's modules that start imports, at any depth
+    (each module's package too, and a module named in `from P import M`),
+    read from every import statement of each file, in a function or not:
+    what can run when start runs."""
+    seen: set[Path] = set()
+    todo = list(start)
+    while todo:
+        parts = todo.pop().split(".")
+        for i in range(1, len(parts) + 1):
+            path = _module_file(root, ".".join(parts[:i]))
+            if path is None or path in seen:
+                continue
+            seen.add(path)
+            for found in _IMPORT.finditer(path.read_text(encoding="utf-8")):
+                if found[3]:
+                    todo.append(found[3])
+                    continue
+                todo.append(found[1])
+                names = re.findall(r"\w+", re.sub(r"#[^\n]*", "", found[2]))
+                todo.extend(f"{found[1]}.{name}" for name in names if name != "as")
+    return sorted(seen)
+
+
+@cache
+def rendering_digest() -> str:
+    """A digest of the modules rendering can run (imported from RENDERING)
+    and of every template: an edit anywhere else in gyrogen (the command
+    line, the analyses, the runtime) keeps the rendered sources cached."""
+    root = Path(gyrogen.__file__).parent
+    h = hashlib.sha256()
+    kept = {*imported(root, RENDERING), *(p for p in digested(root) if p.suffix == ".jinja")}
+    for path in sorted(kept):
+        h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def _stored(scene: Scene) -> Path:
     """Where the scene's rendered sources are kept: the build cache's
-    sources/, keyed by the scene, this gyrogen's code and sympy's version."""
-    text = json.dumps([scene.model_dump(mode="json"), code_digest(), version("sympy")])
+    sources/, keyed by the scene, the code that renders it and sympy's version."""
+    text = json.dumps([scene.model_dump(mode="json"), rendering_digest(), version("sympy")])
     key = hashlib.sha256(text.encode()).hexdigest()[:24]
     return cache_dir() / "sources" / f"{key}.json"
 
