@@ -189,6 +189,52 @@ def test_gyrogen_cache_naming_a_file_is_one_line(tmp_path: Path) -> None:
     assert blocker.read_text() == "not a cache"
 
 
+@pytest.mark.parametrize("value", ["9", "3x", "-O2", "fast"])
+def test_an_optimization_level_not_0_to_3_is_one_line(
+    value: str, source_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """GYROGEN_OPT_LEVEL other than 0, 1, 2 or 3 is named before anything is
+    compiled, and the cache is left untouched."""
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("GYROGEN_OPT_LEVEL", value)
+    with pytest.raises(BuildError) as caught:
+        build.build(source_dir, "c")
+    assert str(caught.value) == (
+        f"GYROGEN_OPT_LEVEL={value!r}: not an optimization level (0, 1, 2 or 3)"
+    )
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").iterdir())
+
+
+def test_every_optimization_level_gives_the_same_bits(
+    source_dir: Path, backends: dict[str, Compiled], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The default scene built at -O2 (the suite's level) runs every method,
+    single and over lanes, to the bits of the -O3 build users run: nothing
+    the levels change reassociates or fuses."""
+    from gyrogen import methods
+    from gyrogen.analysis.simulate.engine import runtime_values
+    from gyrogen.scene import default
+
+    monkeypatch.setenv("GYROGEN_OPT_LEVEL", "2")
+    assert "-O2" in build._plan(source_dir, "c").flags
+    low, high = build.build(source_dir, "c"), backends["c"]
+    scene = default()
+    x0 = np.array(scene.initial_state())
+    c = high.setup(runtime_values(scene))
+    x0s = np.tile(x0, (9, 1))
+    x0s[:, scene.states.index("u1") :] *= 1.0 + 1e-3 * np.arange(9)[:, None]  # the speeds
+    for method in methods.NAMES:
+        steps = 50 if methods.get(method).fixed_step else None
+        ran = [b.integrate(method, x0, c, 0.0, 5.0, rtol=1e-9, atol=1e-9, steps=steps)
+               for b in (low, high)]  # fmt: skip
+        assert np.array_equal(ran[0][0], ran[1][0]) and ran[0][2] == ran[1][2], method
+        assert ran[0][1]["accepted"] == ran[1][1]["accepted"], method
+        batch = [b.integrate_batch(method, x0s, c, 0.0, 5.0, rtol=1e-9, atol=1e-9, steps=steps)
+                 for b in (low, high)]  # fmt: skip
+        assert np.array_equal(batch[0][0], batch[1][0]), method
+        assert np.array_equal(batch[0][2], batch[1][2]) and not batch[1][2].any(), method
+
+
 @pytest.mark.parametrize(
     ("variable", "value", "root"),
     [("GYROGEN_CACHE", "file/cache", "file/cache"), ("XDG_CACHE_HOME", "file", "file/gyrogen")],

@@ -18,6 +18,8 @@ from concurrent.futures import ThreadPoolExecutor
 from functools import cache
 from pathlib import Path
 
+from gyrogen.errors import BuildError
+
 C_WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Werror")
 """Every warning an error: what gyrogen's own builds and the C++ view of a
 header are held to."""
@@ -85,8 +87,29 @@ def env_portable() -> bool:
     return os.environ.get(PORTABLE, "") not in ("", "0")
 
 
+OPT_LEVEL = "GYROGEN_OPT_LEVEL"
+"""Set to 0, 1 or 2, a local build optimizes at that level instead of FAST's
+-O3. The numbers are the same bits at every level (nothing is reassociated
+or fused), the build is faster and the code slower: gcc 12 compiled the
+default scene's largest file with events 2.6x faster at -O2 (22.5 s
+against 8.5 s; gfortran 2.1x), and the explicit methods on stiff_wheel
+took up to 2x longer per step (benchmarks/methods.py). The test suite
+builds at -O2 (tests/conftest.py), the default scene's backends at -O3."""
+
+
+def opt_level() -> str:
+    """The -O flag of a local build: -O3 unless GYROGEN_OPT_LEVEL says another."""
+    value = os.environ.get(OPT_LEVEL, "").strip()
+    if value in ("", "3"):
+        return "-O3"
+    if value in ("0", "1", "2"):
+        return f"-O{value}"
+    raise BuildError(f"{OPT_LEVEL}={value!r}: not an optimization level (0, 1, 2 or 3)")
+
+
 def _optional(tool: str, language: str, native: bool) -> tuple[str, ...]:
-    wanted = [f for f in FAST if native or not f.startswith("-march")]
+    level = opt_level()
+    wanted = [level if f == "-O3" else f for f in FAST if native or not f.startswith("-march")]
     with ThreadPoolExecutor(len(wanted) + 1) as pool:  # the probes at once: ~50 ms each
         taken = list(pool.map(lambda f: accepts(tool, language, f), [*wanted, OPENMP]))
     fast = tuple(f for f, ok in zip(wanted, taken, strict=False) if ok)
