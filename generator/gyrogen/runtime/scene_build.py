@@ -10,10 +10,11 @@ worker) or found in the cache never imports sympy.
 The rendered sources are cached under the build cache's sources/, keyed by
 the scene, the sympy version and a digest of the code that renders it (the
 modules rendering imports, and the templates), so a rerun skips the
-derivation, and so does a run after an edit to the rest of gyrogen. Built sources are written into
-a directory of their own first (runtime/build.py copies them into its cache
-entry, keyed by their bytes and the flags), so two processes building the
-same sources never share a half-written directory.
+derivation, and so does a run after an edit to the rest of gyrogen. Built
+sources are written into a directory of their own first (runtime/build.py
+copies them into its cache entry, keyed by their bytes and the flags), so
+two processes building the same sources never share a half-written
+directory.
 """
 
 from __future__ import annotations
