@@ -43,8 +43,9 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 BUILD_LEVEL = "2"
 """The optimization level of the suite's builds (GYROGEN_OPT_LEVEL, unless
-the run sets it): the same bits as -O3 in a third of the compile time; the
-default scene's backends are built at -O3, the level users run."""
+the run sets it, as `make test-fast` does: -O3, its cache being kept): the
+same bits as -O3 in a third of the compile time; the default scene's
+backends are built at -O3, the level users run."""
 
 
 @pytest.fixture(scope="session", autouse=True)

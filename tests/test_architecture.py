@@ -158,6 +158,7 @@ def test_the_rendering_digest_reads_every_module_rendering_imports() -> None:
     assert reached == digested, (reached - digested, digested - reached)
 
 
+@pytest.mark.slow  # a scene rendered in a new interpreter: 10 s
 def test_rendering_loads_no_module_its_digest_leaves_out() -> None:
     """A new interpreter renders a scene with events, outputs and
     sensitivities: every gyrogen module loaded by then is one the rendering

@@ -94,7 +94,8 @@ or fused), the build is faster and the code slower: gcc 12 compiled the
 default scene's largest file with events 2.6x faster at -O2 (22.5 s
 against 8.5 s; gfortran 2.1x), and the explicit methods on stiff_wheel
 took up to 2x longer per step (benchmarks/methods.py). The test suite
-builds at -O2 (tests/conftest.py), the default scene's backends at -O3."""
+builds at -O2 (tests/conftest.py; `make test-fast` at -O3), the default
+scene's backends at -O3."""
 
 
 def opt_level() -> str:
