@@ -74,8 +74,13 @@ def code_digest() -> str:
     """A digest of gyrogen's own modules and templates: rendered sources
     cached by an older generator are never reused."""
     root = Path(gyrogen.__file__).parent
+    return _digest(root, digested(root))
+
+
+def _digest(root: Path, paths: Iterable[Path]) -> str:
+    """Of each file's name below root and its bytes, in the order given."""
     h = hashlib.sha256()
-    for path in digested(root):
+    for path in paths:
         h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
     return h.hexdigest()[:16]
 
@@ -128,11 +133,8 @@ def rendering_digest() -> str:
     and of every template: an edit anywhere else in gyrogen (the command
     line, the analyses, the runtime) keeps the rendered sources cached."""
     root = Path(gyrogen.__file__).parent
-    h = hashlib.sha256()
     kept = {*imported(root, RENDERING), *(p for p in digested(root) if p.suffix == ".jinja")}
-    for path in sorted(kept):
-        h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
-    return h.hexdigest()[:16]
+    return _digest(root, sorted(kept))
 
 
 def _stored(scene: Scene) -> Path:
