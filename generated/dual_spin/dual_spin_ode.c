@@ -4252,8 +4252,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double c3q[DUAL_SPIN_LANES] = {0};
     int newt[DUAL_SPIN_LANES] = {0};
     int outcome[DUAL_SPIN_LANES] = {0};
+    static const int stored[28] = {0, 1, 2, 3, 5, 8, 9, 10, 11, 12, 15, 16, 17, 18, 19, 24, 25,
+            26, 27, 31, 32, 33, 34, 38, 39, 40, 41, 48};
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -4301,10 +4303,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         DUAL_SPIN_SIMD
@@ -4338,12 +4340,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
@@ -4353,12 +4355,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
@@ -4379,12 +4381,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
@@ -4875,10 +4877,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double c3q[DUAL_SPIN_LANES] = {0};
     int newt[DUAL_SPIN_LANES] = {0};
     int outcome[DUAL_SPIN_LANES] = {0};
+    static const int stored[28] = {0, 1, 2, 3, 5, 8, 9, 10, 11, 12, 15, 16, 17, 18, 19, 24, 25,
+            26, 27, 31, 32, 33, 34, 38, 39, 40, 41, 48};
     double frac[DUAL_SPIN_LANES] = {0};
     int due[DUAL_SPIN_LANES];
     static const double is_angle[7] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -4926,10 +4930,10 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         DUAL_SPIN_SIMD
@@ -4963,12 +4967,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
@@ -4978,12 +4982,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < DUAL_SPIN_NX; ++i) {
@@ -5004,12 +5008,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < DUAL_SPIN_NX * DUAL_SPIN_NX; ++i) {
+        for (e = 0; e < 28; ++e) {
             DUAL_SPIN_SIMD
             for (l = 0; l < DUAL_SPIN_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < DUAL_SPIN_NX; ++i) {

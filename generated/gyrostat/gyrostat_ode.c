@@ -4882,9 +4882,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double c3q[GYROSTAT_LANES] = {0};
     int newt[GYROSTAT_LANES] = {0};
     int outcome[GYROSTAT_LANES] = {0};
+    static const int stored[40] = {0, 1, 2, 7, 9, 15, 16, 21, 22, 23, 29, 30, 35, 36, 37, 45, 50,
+            52, 60, 67, 75, 82, 90, 97, 105, 106, 107, 108, 119, 120, 121, 122, 133, 134, 135,
+            136, 150, 165, 180, 195};
     static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -4932,10 +4935,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         GYROSTAT_SIMD
@@ -4968,12 +4971,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < GYROSTAT_NX; ++i) {
@@ -4983,12 +4986,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < GYROSTAT_NX; ++i) {
@@ -5009,12 +5012,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < GYROSTAT_NX; ++i) {
@@ -5505,11 +5508,14 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double c3q[GYROSTAT_LANES] = {0};
     int newt[GYROSTAT_LANES] = {0};
     int outcome[GYROSTAT_LANES] = {0};
+    static const int stored[40] = {0, 1, 2, 7, 9, 15, 16, 21, 22, 23, 29, 30, 35, 36, 37, 45, 50,
+            52, 60, 67, 75, 82, 90, 97, 105, 106, 107, 108, 119, 120, 121, 122, 133, 134, 135,
+            136, 150, 165, 180, 195};
     double frac[GYROSTAT_LANES] = {0};
     int due[GYROSTAT_LANES];
     static const double is_angle[14] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -5557,10 +5563,10 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         GYROSTAT_SIMD
@@ -5593,12 +5599,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < GYROSTAT_NX; ++i) {
@@ -5608,12 +5614,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < GYROSTAT_NX; ++i) {
@@ -5634,12 +5640,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < GYROSTAT_NX * GYROSTAT_NX; ++i) {
+        for (e = 0; e < 40; ++e) {
             GYROSTAT_SIMD
             for (l = 0; l < GYROSTAT_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < GYROSTAT_NX; ++i) {

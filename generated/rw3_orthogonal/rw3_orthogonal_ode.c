@@ -4757,8 +4757,11 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double c3q[RW3_ORTHOGONAL_LANES] = {0};
     int newt[RW3_ORTHOGONAL_LANES] = {0};
     int outcome[RW3_ORTHOGONAL_LANES] = {0};
+    static const int stored[51] = {0, 1, 2, 3, 5, 10, 11, 12, 13, 14, 19, 20, 21, 22, 23, 30, 31,
+            32, 33, 34, 35, 39, 40, 41, 42, 43, 44, 48, 49, 50, 51, 52, 53, 57, 58, 59, 60, 61,
+            62, 66, 67, 68, 69, 70, 71, 75, 76, 77, 78, 79, 80};
     static const double is_angle[9] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -4806,10 +4809,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         RW3_ORTHOGONAL_SIMD
@@ -4844,12 +4847,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
@@ -4859,12 +4862,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
@@ -4887,12 +4890,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
@@ -5384,10 +5387,13 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double c3q[RW3_ORTHOGONAL_LANES] = {0};
     int newt[RW3_ORTHOGONAL_LANES] = {0};
     int outcome[RW3_ORTHOGONAL_LANES] = {0};
+    static const int stored[51] = {0, 1, 2, 3, 5, 10, 11, 12, 13, 14, 19, 20, 21, 22, 23, 30, 31,
+            32, 33, 34, 35, 39, 40, 41, 42, 43, 44, 48, 49, 50, 51, 52, 53, 57, 58, 59, 60, 61,
+            62, 66, 67, 68, 69, 70, 71, 75, 76, 77, 78, 79, 80};
     double frac[RW3_ORTHOGONAL_LANES] = {0};
     int due[RW3_ORTHOGONAL_LANES];
     static const double is_angle[9] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -5435,10 +5441,10 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         RW3_ORTHOGONAL_SIMD
@@ -5473,12 +5479,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
@@ -5488,12 +5494,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {
@@ -5516,12 +5522,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < RW3_ORTHOGONAL_NX * RW3_ORTHOGONAL_NX; ++i) {
+        for (e = 0; e < 51; ++e) {
             RW3_ORTHOGONAL_SIMD
             for (l = 0; l < RW3_ORTHOGONAL_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < RW3_ORTHOGONAL_NX; ++i) {

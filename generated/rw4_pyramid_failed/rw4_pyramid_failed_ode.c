@@ -5090,8 +5090,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double c3q[RW4_PYRAMID_FAILED_LANES] = {0};
     int newt[RW4_PYRAMID_FAILED_LANES] = {0};
     int outcome[RW4_PYRAMID_FAILED_LANES] = {0};
+    static const int stored[64] = {0, 1, 2, 3, 5, 11, 12, 13, 14, 15, 21, 22, 23, 24, 25, 33, 34,
+            35, 36, 37, 38, 39, 43, 44, 45, 46, 47, 48, 49, 53, 54, 55, 56, 57, 58, 59, 63, 64,
+            65, 66, 67, 68, 69, 73, 74, 75, 76, 77, 78, 79, 83, 84, 85, 86, 87, 88, 89, 93, 94,
+            95, 96, 97, 98, 99};
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -5139,10 +5143,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         RW4_PYRAMID_FAILED_SIMD
@@ -5177,12 +5181,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
@@ -5192,12 +5196,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
@@ -5220,12 +5224,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
@@ -5717,10 +5721,14 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double c3q[RW4_PYRAMID_FAILED_LANES] = {0};
     int newt[RW4_PYRAMID_FAILED_LANES] = {0};
     int outcome[RW4_PYRAMID_FAILED_LANES] = {0};
+    static const int stored[64] = {0, 1, 2, 3, 5, 11, 12, 13, 14, 15, 21, 22, 23, 24, 25, 33, 34,
+            35, 36, 37, 38, 39, 43, 44, 45, 46, 47, 48, 49, 53, 54, 55, 56, 57, 58, 59, 63, 64,
+            65, 66, 67, 68, 69, 73, 74, 75, 76, 77, 78, 79, 83, 84, 85, 86, 87, 88, 89, 93, 94,
+            95, 96, 97, 98, 99};
     double frac[RW4_PYRAMID_FAILED_LANES] = {0};
     int due[RW4_PYRAMID_FAILED_LANES];
     static const double is_angle[10] = {1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -5768,10 +5776,10 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         RW4_PYRAMID_FAILED_SIMD
@@ -5806,12 +5814,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
@@ -5821,12 +5829,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {
@@ -5849,12 +5857,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < RW4_PYRAMID_FAILED_NX * RW4_PYRAMID_FAILED_NX; ++i) {
+        for (e = 0; e < 64; ++e) {
             RW4_PYRAMID_FAILED_SIMD
             for (l = 0; l < RW4_PYRAMID_FAILED_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < RW4_PYRAMID_FAILED_NX; ++i) {

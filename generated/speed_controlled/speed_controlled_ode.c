@@ -4406,8 +4406,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double c3q[SPEED_CONTROLLED_LANES] = {0};
     int newt[SPEED_CONTROLLED_LANES] = {0};
     int outcome[SPEED_CONTROLLED_LANES] = {0};
+    static const int stored[34] = {0, 1, 2, 4, 6, 9, 10, 12, 13, 14, 17, 18, 20, 21, 22, 27, 29,
+            31, 36, 37, 38, 39, 44, 45, 46, 47, 52, 53, 54, 55, 60, 61, 62, 63};
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -4455,10 +4457,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         SPEED_CONTROLLED_SIMD
@@ -4493,12 +4495,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
@@ -4508,12 +4510,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
@@ -4536,12 +4538,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
@@ -5033,10 +5035,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double c3q[SPEED_CONTROLLED_LANES] = {0};
     int newt[SPEED_CONTROLLED_LANES] = {0};
     int outcome[SPEED_CONTROLLED_LANES] = {0};
+    static const int stored[34] = {0, 1, 2, 4, 6, 9, 10, 12, 13, 14, 17, 18, 20, 21, 22, 27, 29,
+            31, 36, 37, 38, 39, 44, 45, 46, 47, 52, 53, 54, 55, 60, 61, 62, 63};
     double frac[SPEED_CONTROLLED_LANES] = {0};
     int due[SPEED_CONTROLLED_LANES];
     static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -5084,10 +5088,10 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         SPEED_CONTROLLED_SIMD
@@ -5122,12 +5126,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
@@ -5137,12 +5141,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
@@ -5165,12 +5169,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+        for (e = 0; e < 34; ++e) {
             SPEED_CONTROLLED_SIMD
             for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {

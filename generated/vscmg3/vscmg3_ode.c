@@ -7430,9 +7430,16 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     double c3q[VSCMG3_LANES] = {0};
     int newt[VSCMG3_LANES] = {0};
     int outcome[VSCMG3_LANES] = {0};
+    static const int stored[126] = {0, 1, 2, 6, 8, 16, 17, 21, 22, 23, 31, 32, 36, 37, 38, 48,
+            49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 63, 64, 65, 66, 67, 68, 69, 70, 71, 72,
+            73, 74, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 93, 94, 95, 96, 97, 98, 99,
+            100, 101, 102, 103, 104, 108, 109, 110, 111, 112, 113, 114, 115, 116, 117, 118, 119,
+            123, 124, 125, 126, 127, 128, 129, 130, 131, 132, 133, 134, 138, 139, 140, 141, 142,
+            143, 144, 145, 146, 147, 148, 149, 153, 154, 155, 156, 157, 158, 159, 160, 161, 162,
+            163, 164, 168, 169, 170, 171, 172, 173, 174, 175, 176, 177, 178, 179, 192, 208, 224};
     static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -7480,10 +7487,10 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         VSCMG3_SIMD
@@ -7516,12 +7523,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < VSCMG3_NX; ++i) {
@@ -7531,12 +7538,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < VSCMG3_NX; ++i) {
@@ -7557,12 +7564,12 @@ static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, dou
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < VSCMG3_NX; ++i) {
@@ -8053,11 +8060,18 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     double c3q[VSCMG3_LANES] = {0};
     int newt[VSCMG3_LANES] = {0};
     int outcome[VSCMG3_LANES] = {0};
+    static const int stored[126] = {0, 1, 2, 6, 8, 16, 17, 21, 22, 23, 31, 32, 36, 37, 38, 48,
+            49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 63, 64, 65, 66, 67, 68, 69, 70, 71, 72,
+            73, 74, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 93, 94, 95, 96, 97, 98, 99,
+            100, 101, 102, 103, 104, 108, 109, 110, 111, 112, 113, 114, 115, 116, 117, 118, 119,
+            123, 124, 125, 126, 127, 128, 129, 130, 131, 132, 133, 134, 138, 139, 140, 141, 142,
+            143, 144, 145, 146, 147, 148, 149, 153, 154, 155, 156, 157, 158, 159, 160, 161, 162,
+            163, 164, 168, 169, 170, 171, 172, 173, 174, 175, 176, 177, 178, 179, 192, 208, 224};
     double frac[VSCMG3_LANES] = {0};
     int due[VSCMG3_LANES];
     static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0};
-    int i, j, l;
+    int e, i, j, l;
     int need;
     rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
     atol_e = rtol_e * (atol / rtol);
@@ -8105,10 +8119,10 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
             }
         }
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->J[i][l] = fresh[l] ? L->jn[i][l] : L->J[i][l];
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
             }
         }
         VSCMG3_SIMD
@@ -8141,12 +8155,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
     if (need) {
 
         /* each lane's kept factors, then E1 and E2 for this h on every lane */
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->e1[i][l] = L->lu[i][l];
-                L->e2rk[i][l] = L->e2r[i][l];
-                L->e2ik[i][l] = L->e2i[i][l];
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
             }
         }
         for (i = 0; i < VSCMG3_NX; ++i) {
@@ -8156,12 +8170,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
                 L->piv2k[i][l] = L->piv2[i][l];
             }
         }
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->lu[i][l] = -L->J[i][l];
-                L->e2r[i][l] = -L->J[i][l];
-                L->e2i[i][l] = 0.0;
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
             }
         }
         for (i = 0; i < VSCMG3_NX; ++i) {
@@ -8182,12 +8196,12 @@ static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol
         }
 
         /* a lane that refactors none: its kept factors back */
-        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+        for (e = 0; e < 126; ++e) {
             VSCMG3_SIMD
             for (l = 0; l < VSCMG3_LANES; ++l) {
-                L->lu[i][l] = refac[l] ? L->lu[i][l] : L->e1[i][l];
-                L->e2r[i][l] = refac[l] ? L->e2r[i][l] : L->e2rk[i][l];
-                L->e2i[i][l] = refac[l] ? L->e2i[i][l] : L->e2ik[i][l];
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
             }
         }
         for (i = 0; i < VSCMG3_NX; ++i) {

@@ -109,6 +109,7 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
 
 
 def _radau(m: Method, g: Given) -> Parts:
+    assert g.blocks is not None, "an implicit method needs the Jacobian's blocks"
     return Parts(
         [
             radau.factor(m),
@@ -119,8 +120,8 @@ def _radau(m: Method, g: Given) -> Parts:
             *([radau_step.integrate(m, g.quaternion, g.events, g.knots)] if g.events else []),
         ],
         [
-            radau_step.lanes_step(m, g.quaternion, knots=g.knots),
-            radau_step.lanes_step(m, g.quaternion, True, g.knots),
+            radau_step.lanes_step(m, g.quaternion, g.blocks, knots=g.knots),
+            radau_step.lanes_step(m, g.quaternion, g.blocks, True, g.knots),
         ],
         radau_step.lane_state(m),
         radau_step.lane_start(m),

@@ -53,6 +53,7 @@ from gyrogen.codegen.ir.nodes import (
 )
 from gyrogen.codegen.ir.nodes import real as scalar
 from gyrogen.methods import Method, RadauControl
+from gyrogen.symbolic.blocks import Blocks
 from gyrogen.tableaus import Radau
 
 V = {n: Var(n) for n in (
@@ -329,7 +330,9 @@ def _any_nonfinite(flag: Var, values: Var, n: E) -> list[S]:
     return [For("i", n, (assign(flag, or_(flag, not_(fn("finite", values[i])))),))]
 
 
-def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Knots = ()) -> Func:
+def lanes_step(
+    m: Method, quaternion: bool, blocks: Blocks, grid: bool = False, knots: driver.Knots = ()
+) -> Func:
     """m.name_step_lanes: one turn of m.name_integrate's loop on every lane,
     each branch a selection (a lane that stopped, whose E1 or E2 is singular
     or whose Newton iterations fail computes on and keeps nothing); its
@@ -354,6 +357,10 @@ def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Kn
     t1 = Var("t1")
     row = driver.BASE + driver.G
     nx2 = Const("NX2")
+    # the entries of J and the factors the LU reads and writes (linear.shift's)
+    nx = len(blocks.end)
+    stored = tuple(r * nx + col for r, cols in enumerate(blocks.stored) for col in cols)
+    entries, q = Int(len(stored)), Var("stored")[Var("e")]
 
     def rejected(when: E) -> list[S]:
         return [
@@ -382,7 +389,7 @@ def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Kn
             Call("jac", (t, x, c, jn)),
             driver.count("jac_calls", 1),
             *_any_nonfinite(bad, jn, nx2),
-            For("i", nx2, (assign(v["J"][i], jn[i]),)),
+            For("e", entries, (assign(v["J"][q], jn[q]),)),
             assign(cd, sel(bad, driver.ERR_NONFINITE, cd)),
             assign(v["fresh_jac"], True),
             assign(v["need_jac"], False),
@@ -406,10 +413,10 @@ def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Kn
         assign(sing, False),
         If(need, (
             Comment("each lane's kept factors, then E1 and E2 for this h on every lane"),
-            For("i", nx2, (assign(e1[i], lu[i]), assign(e2rk[i], e2r[i]),
-                           assign(e2ik[i], e2i[i]))),
+            For("e", entries, (assign(e1[q], lu[q]), assign(e2rk[q], e2r[q]),
+                               assign(e2ik[q], e2i[q]))),
             each(assign(piv1[i], piv[i]), assign(piv2k[i], piv2[i])),
-            For("i", nx2, (assign(lu[i], -J[i]), assign(e2r[i], -J[i]), assign(e2i[i], 0.0))),
+            For("e", entries, (assign(lu[q], -J[q]), assign(e2r[q], -J[q]), assign(e2i[q], 0.0))),
             each(assign(lu[diag], g_ - J[diag]), assign(e2r[diag], a_ - J[diag]),
                  assign(e2i[diag], b_)),
             Call("lu_decompose", (), "E1's LU on every lane, each its own pivots"),
@@ -417,9 +424,9 @@ def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Kn
             assign(sing, linear.ZERO_PIVOT),
             driver.count("decompositions", 1),
             Comment("a lane that refactors none: its kept factors back"),
-            For("i", nx2, (assign(lu[i], sel(need, lu[i], e1[i])),
-                           assign(e2r[i], sel(need, e2r[i], e2rk[i])),
-                           assign(e2i[i], sel(need, e2i[i], e2ik[i])))),
+            For("e", entries, (assign(lu[q], sel(need, lu[q], e1[q])),
+                               assign(e2r[q], sel(need, e2r[q], e2rk[q])),
+                               assign(e2i[q], sel(need, e2i[q], e2ik[q])))),
             each(assign(piv[i], sel(need, piv[i], piv1[i])),
                  assign(piv2[i], sel(need, piv2[i], piv2k[i]))),
         ), own=("e1", "e2rk", "e2ik", "piv1", "piv2k", "lu", "e2r", "e2i", "piv", "piv2")),
@@ -657,6 +664,7 @@ def lanes_step(m: Method, quaternion: bool, grid: bool = False, knots: driver.Kn
         *(Decl(n, "int", (), "inout", zero) for n in ("newt", "outcome")),
         *driver.knot_locals(knots),
         *(scalar("norm", "inout") for _ in range(int(quaternion))),
+        Decl("stored", "int", (len(stored),), values=stored),
     )
     if grid:
         locals_ += driver.lane_grid_locals(body)
