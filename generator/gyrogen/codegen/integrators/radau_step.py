@@ -360,7 +360,7 @@ def lanes_step(
     # the entries of J and the factors the LU reads and writes (linear.shift's)
     nx = len(blocks.end)
     stored = tuple(r * nx + col for r, cols in enumerate(blocks.stored) for col in cols)
-    entries, q = Int(len(stored)), Var("stored")[Var("e")]
+    entries, at_e = Int(len(stored)), Var("stored")[Var("e")]
 
     def rejected(when: E) -> list[S]:
         return [
@@ -389,7 +389,7 @@ def lanes_step(
             Call("jac", (t, x, c, jn)),
             driver.count("jac_calls", 1),
             *_any_nonfinite(bad, jn, nx2),
-            For("e", entries, (assign(v["J"][q], jn[q]),)),
+            For("e", entries, (assign(v["J"][at_e], jn[at_e]),)),
             assign(cd, sel(bad, driver.ERR_NONFINITE, cd)),
             assign(v["fresh_jac"], True),
             assign(v["need_jac"], False),
@@ -413,10 +413,11 @@ def lanes_step(
         assign(sing, False),
         If(need, (
             Comment("each lane's kept factors, then E1 and E2 for this h on every lane"),
-            For("e", entries, (assign(e1[q], lu[q]), assign(e2rk[q], e2r[q]),
-                               assign(e2ik[q], e2i[q]))),
+            For("e", entries, (assign(e1[at_e], lu[at_e]), assign(e2rk[at_e], e2r[at_e]),
+                               assign(e2ik[at_e], e2i[at_e]))),
             each(assign(piv1[i], piv[i]), assign(piv2k[i], piv2[i])),
-            For("e", entries, (assign(lu[q], -J[q]), assign(e2r[q], -J[q]), assign(e2i[q], 0.0))),
+            For("e", entries, (assign(lu[at_e], -J[at_e]), assign(e2r[at_e], -J[at_e]),
+                               assign(e2i[at_e], 0.0))),
             each(assign(lu[diag], g_ - J[diag]), assign(e2r[diag], a_ - J[diag]),
                  assign(e2i[diag], b_)),
             Call("lu_decompose", (), "E1's LU on every lane, each its own pivots"),
@@ -424,9 +425,9 @@ def lanes_step(
             assign(sing, linear.ZERO_PIVOT),
             driver.count("decompositions", 1),
             Comment("a lane that refactors none: its kept factors back"),
-            For("e", entries, (assign(lu[q], sel(need, lu[q], e1[q])),
-                               assign(e2r[q], sel(need, e2r[q], e2rk[q])),
-                               assign(e2i[q], sel(need, e2i[q], e2ik[q])))),
+            For("e", entries, (assign(lu[at_e], sel(need, lu[at_e], e1[at_e])),
+                               assign(e2r[at_e], sel(need, e2r[at_e], e2rk[at_e])),
+                               assign(e2i[at_e], sel(need, e2i[at_e], e2ik[at_e])))),
             each(assign(piv[i], sel(need, piv[i], piv1[i])),
                  assign(piv2[i], sel(need, piv2[i], piv2k[i]))),
         ), own=("e1", "e2rk", "e2ik", "piv1", "piv2k", "lu", "e2r", "e2i", "piv", "piv2")),
