@@ -49,6 +49,14 @@ def _run(exe: Path, tmp: Path, threads: int = 1) -> tuple[bytes, bytes]:
     return data[: len(data) // 2], data[len(data) // 2 :]
 
 
+def _stats(block: bytes, which: int, field: str) -> np.ndarray:
+    """One integer field of the which-th batch's statistics in a run's bytes."""
+    size = N * NX * 8 + N * 8 * len(abi.STATS_FIELDS) + N * 4
+    part = block[which * size + N * NX * 8 : which * size + size - N * 4]
+    names = [f.name for f in abi.STATS_FIELDS]
+    return np.frombuffer(part, dtype=np.int64).reshape(N, len(names))[:, names.index(field)]
+
+
 def _codes(block: bytes, which: int) -> np.ndarray:
     """The codes of the which-th batch in a run's bytes."""
     size = N * NX * 8 + N * 8 * len(abi.STATS_FIELDS) + N * 4
@@ -79,6 +87,12 @@ def test_results_do_not_depend_on_lanes_or_threads(
     rodas4, rodas4_budget = _codes(batch, 4), _codes(batch, 5)
     assert rodas4[NAN_TRAJ] == NONFINITE and np.count_nonzero(rodas4) == 1
     assert set(rodas4_budget) == {MAX_STEPS, NONFINITE}
+    radau5, radau5_budget = _codes(batch, 6), _codes(batch, 7)
+    assert radau5[NAN_TRAJ] == NONFINITE and np.count_nonzero(radau5) == 1
+    assert set(radau5_budget) == {MAX_STEPS, NONFINITE}
+    # lanes that reject steps and take Newton iterations of their own number
+    assert np.count_nonzero(_stats(batch, 6, "rejected")) > 0
+    assert len(set(_stats(batch, 6, "rhs_calls") - 2 * _stats(batch, 6, "accepted"))) > 2
 
 
 def test_batch_agrees_with_single_through_python(backends: dict[str, Compiled]) -> None:

@@ -1449,6 +1449,31 @@ struct SPEED_CONTROLLED_ALIGNED lanes {
     double err_acc[SPEED_CONTROLLED_LANES];
     long stats_jac_calls[SPEED_CONTROLLED_LANES];
     long stats_decompositions[SPEED_CONTROLLED_LANES];
+    double jn[SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double e1[SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double e2rk[SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double e2ik[SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double e2r[SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double e2i[SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double z2[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double z3[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double zs1[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double zs2[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double zs3[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double w1[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double w2[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double w3[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double ak1[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double ak2[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double ak3[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double scal[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double eg[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    double h_old[SPEED_CONTROLLED_LANES];
+    double rate[SPEED_CONTROLLED_LANES];
+    double theta[SPEED_CONTROLLED_LANES];
+    double theta_old[SPEED_CONTROLLED_LANES];
+    double dyno_old[SPEED_CONTROLLED_LANES];
+    double span[SPEED_CONTROLLED_LANES];
     double cap[SPEED_CONTROLLED_LANES];
     double tay[21][21][SPEED_CONTROLLED_LANES];
     double acc[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
@@ -1461,6 +1486,16 @@ struct SPEED_CONTROLLED_ALIGNED lanes {
     int zero_pivot[SPEED_CONTROLLED_LANES];
     int new_point[SPEED_CONTROLLED_LANES];
     int singular[SPEED_CONTROLLED_LANES];
+    int piv2[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    int piv1[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    int piv2k[SPEED_CONTROLLED_NX][SPEED_CONTROLLED_LANES];
+    int ending[SPEED_CONTROLLED_LANES];
+    int first[SPEED_CONTROLLED_LANES];
+    int reject[SPEED_CONTROLLED_LANES];
+    int fresh_jac[SPEED_CONTROLLED_LANES];
+    int need_jac[SPEED_CONTROLLED_LANES];
+    int need_lu[SPEED_CONTROLLED_LANES];
+    int begun[SPEED_CONTROLLED_LANES];
     long ntimes;
     const double *times;
     double (*out)[SPEED_CONTROLLED_NX];
@@ -1809,6 +1844,429 @@ static void lu_solve_lanes(struct lanes *L, int s)
         L->k[s][5][l] = b5;
         L->k[s][6][l] = b6;
         L->k[s][7][l] = b7;
+    }
+}
+
+/* lu_decompose_complex on every lane's e2r + i e2i; a zero pivot or-ed into zero_pivot. */
+static void lu_decompose_complex_lanes(struct lanes *L)
+{
+    int p[SPEED_CONTROLLED_LANES];
+    double best[SPEED_CONTROLLED_LANES];
+    double re[SPEED_CONTROLLED_LANES];
+    double im[SPEED_CONTROLLED_LANES];
+    double r[SPEED_CONTROLLED_LANES];
+    double d[SPEED_CONTROLLED_LANES];
+    double lr[SPEED_CONTROLLED_LANES];
+    double li[SPEED_CONTROLLED_LANES];
+    double ur[SPEED_CONTROLLED_LANES];
+    double ui[SPEED_CONTROLLED_LANES];
+    int col, i, j, l, q;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->piv2[0][l] = 0;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[0][l]) + fabs(L->e2i[0][l]) > 0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        re[l] = L->e2r[0][l];
+        im[l] = L->e2i[0][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[0][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[0][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        ur[l] = L->e2r[1][l];
+        ui[l] = L->e2i[1][l];
+        L->e2r[1][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[1][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        ur[l] = L->e2r[2][l];
+        ui[l] = L->e2i[2][l];
+        L->e2r[2][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[2][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        ur[l] = L->e2r[4][l];
+        ui[l] = L->e2i[4][l];
+        L->e2r[4][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[4][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        ur[l] = L->e2r[6][l];
+        ui[l] = L->e2i[6][l];
+        L->e2r[6][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[6][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->e2r[1 * SPEED_CONTROLLED_NX + 1][l]) + fabs(L->e2i[1 *
+                SPEED_CONTROLLED_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            p[l] = fabs(L->e2r[i * SPEED_CONTROLLED_NX + 1][l]) + fabs(L->e2i[i *
+                    SPEED_CONTROLLED_NX + 1][l]) > best[l] ? i : p[l];
+            best[l] = fabs(L->e2r[i * SPEED_CONTROLLED_NX + 1][l]) + fabs(L->e2i[i *
+                    SPEED_CONTROLLED_NX + 1][l]) > best[l] ? fabs(L->e2r[i * SPEED_CONTROLLED_NX
+                    + 1][l]) + fabs(L->e2i[i * SPEED_CONTROLLED_NX + 1][l]) : best[l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->piv2[1][l] = p[l];
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < SPEED_CONTROLLED_NX; ++j) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                double held;
+                held = L->e2r[1 * SPEED_CONTROLLED_NX + j][l];
+                L->e2r[1 * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? L->e2r[q *
+                        SPEED_CONTROLLED_NX + j][l] : L->e2r[1 * SPEED_CONTROLLED_NX + j][l];
+                L->e2r[q * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? held : L->e2r[q *
+                        SPEED_CONTROLLED_NX + j][l];
+                held = L->e2i[1 * SPEED_CONTROLLED_NX + j][l];
+                L->e2i[1 * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? L->e2i[q *
+                        SPEED_CONTROLLED_NX + j][l] : L->e2i[1 * SPEED_CONTROLLED_NX + j][l];
+                L->e2i[q * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? held : L->e2i[q *
+                        SPEED_CONTROLLED_NX + j][l];
+            }
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        re[l] = L->e2r[9][l];
+        im[l] = L->e2i[9][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[9][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[9][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+    }
+    for (i = 2; i < 3; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            lr[l] = L->e2r[i * SPEED_CONTROLLED_NX + 1][l] * L->e2r[9][l] - L->e2i[i *
+                    SPEED_CONTROLLED_NX + 1][l] * L->e2i[9][l];
+            li[l] = L->e2r[i * SPEED_CONTROLLED_NX + 1][l] * L->e2i[9][l] + L->e2i[i *
+                    SPEED_CONTROLLED_NX + 1][l] * L->e2r[9][l];
+            L->e2r[i * SPEED_CONTROLLED_NX + 1][l] = lr[l];
+            L->e2i[i * SPEED_CONTROLLED_NX + 1][l] = li[l];
+            ur[l] = L->e2r[10][l];
+            ui[l] = L->e2i[10][l];
+            L->e2r[i * SPEED_CONTROLLED_NX + 2][l] = L->e2r[i * SPEED_CONTROLLED_NX + 2][l] -
+                    (lr[l] * ur[l] - li[l] * ui[l]);
+            L->e2i[i * SPEED_CONTROLLED_NX + 2][l] = L->e2i[i * SPEED_CONTROLLED_NX + 2][l] -
+                    (lr[l] * ui[l] + li[l] * ur[l]);
+            ur[l] = L->e2r[12][l];
+            ui[l] = L->e2i[12][l];
+            L->e2r[i * SPEED_CONTROLLED_NX + 4][l] = L->e2r[i * SPEED_CONTROLLED_NX + 4][l] -
+                    (lr[l] * ur[l] - li[l] * ui[l]);
+            L->e2i[i * SPEED_CONTROLLED_NX + 4][l] = L->e2i[i * SPEED_CONTROLLED_NX + 4][l] -
+                    (lr[l] * ui[l] + li[l] * ur[l]);
+            ur[l] = L->e2r[13][l];
+            ui[l] = L->e2i[13][l];
+            L->e2r[i * SPEED_CONTROLLED_NX + 5][l] = L->e2r[i * SPEED_CONTROLLED_NX + 5][l] -
+                    (lr[l] * ur[l] - li[l] * ui[l]);
+            L->e2i[i * SPEED_CONTROLLED_NX + 5][l] = L->e2i[i * SPEED_CONTROLLED_NX + 5][l] -
+                    (lr[l] * ui[l] + li[l] * ur[l]);
+            ur[l] = L->e2r[14][l];
+            ui[l] = L->e2i[14][l];
+            L->e2r[i * SPEED_CONTROLLED_NX + 6][l] = L->e2r[i * SPEED_CONTROLLED_NX + 6][l] -
+                    (lr[l] * ur[l] - li[l] * ui[l]);
+            L->e2i[i * SPEED_CONTROLLED_NX + 6][l] = L->e2i[i * SPEED_CONTROLLED_NX + 6][l] -
+                    (lr[l] * ui[l] + li[l] * ur[l]);
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        ur[l] = L->e2r[10][l];
+        ui[l] = L->e2i[10][l];
+        L->e2r[10][l] = ur[l] * L->e2r[9][l] - ui[l] * L->e2i[9][l];
+        L->e2i[10][l] = ur[l] * L->e2i[9][l] + ui[l] * L->e2r[9][l];
+        ur[l] = L->e2r[12][l];
+        ui[l] = L->e2i[12][l];
+        L->e2r[12][l] = ur[l] * L->e2r[9][l] - ui[l] * L->e2i[9][l];
+        L->e2i[12][l] = ur[l] * L->e2i[9][l] + ui[l] * L->e2r[9][l];
+        ur[l] = L->e2r[13][l];
+        ui[l] = L->e2i[13][l];
+        L->e2r[13][l] = ur[l] * L->e2r[9][l] - ui[l] * L->e2i[9][l];
+        L->e2i[13][l] = ur[l] * L->e2i[9][l] + ui[l] * L->e2r[9][l];
+        ur[l] = L->e2r[14][l];
+        ui[l] = L->e2i[14][l];
+        L->e2r[14][l] = ur[l] * L->e2r[9][l] - ui[l] * L->e2i[9][l];
+        L->e2i[14][l] = ur[l] * L->e2i[9][l] + ui[l] * L->e2r[9][l];
+        L->piv2[2][l] = 2;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[18][l]) + fabs(L->e2i[18][l]) > 0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        re[l] = L->e2r[18][l];
+        im[l] = L->e2i[18][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[18][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[18][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        ur[l] = L->e2r[20][l];
+        ui[l] = L->e2i[20][l];
+        L->e2r[20][l] = ur[l] * L->e2r[18][l] - ui[l] * L->e2i[18][l];
+        L->e2i[20][l] = ur[l] * L->e2i[18][l] + ui[l] * L->e2r[18][l];
+        ur[l] = L->e2r[21][l];
+        ui[l] = L->e2i[21][l];
+        L->e2r[21][l] = ur[l] * L->e2r[18][l] - ui[l] * L->e2i[18][l];
+        L->e2i[21][l] = ur[l] * L->e2i[18][l] + ui[l] * L->e2r[18][l];
+        ur[l] = L->e2r[22][l];
+        ui[l] = L->e2i[22][l];
+        L->e2r[22][l] = ur[l] * L->e2r[18][l] - ui[l] * L->e2i[18][l];
+        L->e2i[22][l] = ur[l] * L->e2i[18][l] + ui[l] * L->e2r[18][l];
+        L->piv2[3][l] = 3;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[27][l]) + fabs(L->e2i[27][l]) > 0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        re[l] = L->e2r[27][l];
+        im[l] = L->e2i[27][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[27][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[27][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        ur[l] = L->e2r[29][l];
+        ui[l] = L->e2i[29][l];
+        L->e2r[29][l] = ur[l] * L->e2r[27][l] - ui[l] * L->e2i[27][l];
+        L->e2i[29][l] = ur[l] * L->e2i[27][l] + ui[l] * L->e2r[27][l];
+        ur[l] = L->e2r[31][l];
+        ui[l] = L->e2i[31][l];
+        L->e2r[31][l] = ur[l] * L->e2r[27][l] - ui[l] * L->e2i[27][l];
+        L->e2i[31][l] = ur[l] * L->e2i[27][l] + ui[l] * L->e2r[27][l];
+    }
+    for (col = 4; col < 7; ++col) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            p[l] = col;
+            best[l] = fabs(L->e2r[col * SPEED_CONTROLLED_NX + col][l]) + fabs(L->e2i[col *
+                    SPEED_CONTROLLED_NX + col][l]);
+        }
+        for (i = col + 1; i < 8; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                p[l] = fabs(L->e2r[i * SPEED_CONTROLLED_NX + col][l]) + fabs(L->e2i[i *
+                        SPEED_CONTROLLED_NX + col][l]) > best[l] ? i : p[l];
+                best[l] = fabs(L->e2r[i * SPEED_CONTROLLED_NX + col][l]) + fabs(L->e2i[i *
+                        SPEED_CONTROLLED_NX + col][l]) > best[l] ? fabs(L->e2r[i *
+                        SPEED_CONTROLLED_NX + col][l]) + fabs(L->e2i[i * SPEED_CONTROLLED_NX +
+                        col][l]) : best[l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->piv2[col][l] = p[l];
+            L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+        }
+        for (q = col + 1; q < 8; ++q) {
+            for (j = 4; j < SPEED_CONTROLLED_NX; ++j) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    double held;
+                    held = L->e2r[col * SPEED_CONTROLLED_NX + j][l];
+                    L->e2r[col * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? L->e2r[q *
+                            SPEED_CONTROLLED_NX + j][l] : L->e2r[col * SPEED_CONTROLLED_NX + j][l];
+                    L->e2r[q * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? held : L->e2r[q *
+                            SPEED_CONTROLLED_NX + j][l];
+                    held = L->e2i[col * SPEED_CONTROLLED_NX + j][l];
+                    L->e2i[col * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? L->e2i[q *
+                            SPEED_CONTROLLED_NX + j][l] : L->e2i[col * SPEED_CONTROLLED_NX + j][l];
+                    L->e2i[q * SPEED_CONTROLLED_NX + j][l] = p[l] == q ? held : L->e2i[q *
+                            SPEED_CONTROLLED_NX + j][l];
+                }
+            }
+        }
+        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            re[l] = L->e2r[col * SPEED_CONTROLLED_NX + col][l];
+            im[l] = L->e2i[col * SPEED_CONTROLLED_NX + col][l];
+            r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+            d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+            L->e2r[col * SPEED_CONTROLLED_NX + col][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l]
+                    : r[l] / d[l];
+            L->e2i[col * SPEED_CONTROLLED_NX + col][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] /
+                    d[l] : -1.0 / d[l];
+        }
+        for (i = col + 1; i < 8; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                lr[l] = L->e2r[i * SPEED_CONTROLLED_NX + col][l] * L->e2r[col *
+                        SPEED_CONTROLLED_NX + col][l] - L->e2i[i * SPEED_CONTROLLED_NX + col][l]
+                        * L->e2i[col * SPEED_CONTROLLED_NX + col][l];
+                li[l] = L->e2r[i * SPEED_CONTROLLED_NX + col][l] * L->e2i[col *
+                        SPEED_CONTROLLED_NX + col][l] + L->e2i[i * SPEED_CONTROLLED_NX + col][l]
+                        * L->e2r[col * SPEED_CONTROLLED_NX + col][l];
+                L->e2r[i * SPEED_CONTROLLED_NX + col][l] = lr[l];
+                L->e2i[i * SPEED_CONTROLLED_NX + col][l] = li[l];
+            }
+            for (j = col + 1; j < 8; ++j) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    ur[l] = L->e2r[col * SPEED_CONTROLLED_NX + j][l];
+                    ui[l] = L->e2i[col * SPEED_CONTROLLED_NX + j][l];
+                    L->e2r[i * SPEED_CONTROLLED_NX + j][l] = L->e2r[i * SPEED_CONTROLLED_NX +
+                            j][l] - (lr[l] * ur[l] - li[l] * ui[l]);
+                    L->e2i[i * SPEED_CONTROLLED_NX + j][l] = L->e2i[i * SPEED_CONTROLLED_NX +
+                            j][l] - (lr[l] * ui[l] + li[l] * ur[l]);
+                }
+            }
+        }
+        for (j = col + 1; j < 8; ++j) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                ur[l] = L->e2r[col * SPEED_CONTROLLED_NX + j][l];
+                ui[l] = L->e2i[col * SPEED_CONTROLLED_NX + j][l];
+                L->e2r[col * SPEED_CONTROLLED_NX + j][l] = ur[l] * L->e2r[col *
+                        SPEED_CONTROLLED_NX + col][l] - ui[l] * L->e2i[col * SPEED_CONTROLLED_NX
+                        + col][l];
+                L->e2i[col * SPEED_CONTROLLED_NX + j][l] = ur[l] * L->e2i[col *
+                        SPEED_CONTROLLED_NX + col][l] + ui[l] * L->e2r[col * SPEED_CONTROLLED_NX
+                        + col][l];
+            }
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->piv2[7][l] = 7;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[63][l]) + fabs(L->e2i[63][l]) > 0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        re[l] = L->e2r[63][l];
+        im[l] = L->e2i[63][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[63][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[63][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+    }
+}
+
+/* lu_solve_complex on every lane's z2 + i z3, its rows exchanged by selection. */
+static void lu_solve_complex_lanes(struct lanes *L)
+{
+    int l, q, r;
+    for (r = 1; r < 2; ++r) {
+        for (q = r + 1; q < 3; ++q) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                double swap;
+                swap = L->z2[r][l];
+                L->z2[r][l] = L->piv2[r][l] == q ? L->z2[q][l] : L->z2[r][l];
+                L->z2[q][l] = L->piv2[r][l] == q ? swap : L->z2[q][l];
+                swap = L->z3[r][l];
+                L->z3[r][l] = L->piv2[r][l] == q ? L->z3[q][l] : L->z3[r][l];
+                L->z3[q][l] = L->piv2[r][l] == q ? swap : L->z3[q][l];
+            }
+        }
+    }
+    for (r = 4; r < 7; ++r) {
+        for (q = r + 1; q < 8; ++q) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                double swap;
+                swap = L->z2[r][l];
+                L->z2[r][l] = L->piv2[r][l] == q ? L->z2[q][l] : L->z2[r][l];
+                L->z2[q][l] = L->piv2[r][l] == q ? swap : L->z2[q][l];
+                swap = L->z3[r][l];
+                L->z3[r][l] = L->piv2[r][l] == q ? L->z3[q][l] : L->z3[r][l];
+                L->z3[q][l] = L->piv2[r][l] == q ? swap : L->z3[q][l];
+            }
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        double br0, bi0, br1, bi1, br2, bi2, br3, bi3, br4, bi4, br5, bi5, br6, bi6, br7, bi7, re;
+        br0 = L->z2[0][l];
+        bi0 = L->z3[0][l];
+        br1 = L->z2[1][l];
+        bi1 = L->z3[1][l];
+        br2 = L->z2[2][l];
+        bi2 = L->z3[2][l];
+        br3 = L->z2[3][l];
+        bi3 = L->z3[3][l];
+        br4 = L->z2[4][l];
+        bi4 = L->z3[4][l];
+        br5 = L->z2[5][l];
+        bi5 = L->z3[5][l];
+        br6 = L->z2[6][l];
+        bi6 = L->z3[6][l];
+        br7 = L->z2[7][l];
+        bi7 = L->z3[7][l];
+        br2 = br2 - L->e2r[17][l] * br1 + L->e2i[17][l] * bi1;
+        bi2 = bi2 - L->e2r[17][l] * bi1 - L->e2i[17][l] * br1;
+        br5 = br5 - L->e2r[44][l] * br4 + L->e2i[44][l] * bi4;
+        bi5 = bi5 - L->e2r[44][l] * bi4 - L->e2i[44][l] * br4;
+        br6 = br6 - L->e2r[52][l] * br4 + L->e2i[52][l] * bi4 - L->e2r[53][l] * br5 +
+                L->e2i[53][l] * bi5;
+        bi6 = bi6 - L->e2r[52][l] * bi4 - L->e2i[52][l] * br4 - L->e2r[53][l] * bi5 -
+                L->e2i[53][l] * br5;
+        br7 = br7 - L->e2r[60][l] * br4 + L->e2i[60][l] * bi4 - L->e2r[61][l] * br5 +
+                L->e2i[61][l] * bi5 - L->e2r[62][l] * br6 + L->e2i[62][l] * bi6;
+        bi7 = bi7 - L->e2r[60][l] * bi4 - L->e2i[60][l] * br4 - L->e2r[61][l] * bi5 -
+                L->e2i[61][l] * br5 - L->e2r[62][l] * bi6 - L->e2i[62][l] * br6;
+        re = br7 * L->e2r[63][l] - bi7 * L->e2i[63][l];
+        bi7 = bi7 * L->e2r[63][l] + br7 * L->e2i[63][l];
+        br7 = re;
+        re = br6 * L->e2r[54][l] - bi6 * L->e2i[54][l] - L->e2r[55][l] * br7 + L->e2i[55][l] * bi7;
+        bi6 = bi6 * L->e2r[54][l] + br6 * L->e2i[54][l] - L->e2r[55][l] * bi7 - L->e2i[55][l] * br7;
+        br6 = re;
+        re = br5 * L->e2r[45][l] - bi5 * L->e2i[45][l] - L->e2r[47][l] * br7 + L->e2i[47][l] *
+                bi7 - L->e2r[46][l] * br6 + L->e2i[46][l] * bi6;
+        bi5 = bi5 * L->e2r[45][l] + br5 * L->e2i[45][l] - L->e2r[47][l] * bi7 - L->e2i[47][l] *
+                br7 - L->e2r[46][l] * bi6 - L->e2i[46][l] * br6;
+        br5 = re;
+        re = br4 * L->e2r[36][l] - bi4 * L->e2i[36][l] - L->e2r[39][l] * br7 + L->e2i[39][l] *
+                bi7 - L->e2r[38][l] * br6 + L->e2i[38][l] * bi6 - L->e2r[37][l] * br5 +
+                L->e2i[37][l] * bi5;
+        bi4 = bi4 * L->e2r[36][l] + br4 * L->e2i[36][l] - L->e2r[39][l] * bi7 - L->e2i[39][l] *
+                br7 - L->e2r[38][l] * bi6 - L->e2i[38][l] * br6 - L->e2r[37][l] * bi5 -
+                L->e2i[37][l] * br5;
+        br4 = re;
+        re = br3 * L->e2r[27][l] - bi3 * L->e2i[27][l] - L->e2r[31][l] * br7 + L->e2i[31][l] *
+                bi7 - L->e2r[29][l] * br5 + L->e2i[29][l] * bi5;
+        bi3 = bi3 * L->e2r[27][l] + br3 * L->e2i[27][l] - L->e2r[31][l] * bi7 - L->e2i[31][l] *
+                br7 - L->e2r[29][l] * bi5 - L->e2i[29][l] * br5;
+        br3 = re;
+        re = br2 * L->e2r[18][l] - bi2 * L->e2i[18][l] - L->e2r[22][l] * br6 + L->e2i[22][l] *
+                bi6 - L->e2r[21][l] * br5 + L->e2i[21][l] * bi5 - L->e2r[20][l] * br4 +
+                L->e2i[20][l] * bi4;
+        bi2 = bi2 * L->e2r[18][l] + br2 * L->e2i[18][l] - L->e2r[22][l] * bi6 - L->e2i[22][l] *
+                br6 - L->e2r[21][l] * bi5 - L->e2i[21][l] * br5 - L->e2r[20][l] * bi4 -
+                L->e2i[20][l] * br4;
+        br2 = re;
+        re = br1 * L->e2r[9][l] - bi1 * L->e2i[9][l] - L->e2r[14][l] * br6 + L->e2i[14][l] * bi6
+                - L->e2r[13][l] * br5 + L->e2i[13][l] * bi5 - L->e2r[12][l] * br4 + L->e2i[12][l]
+                * bi4 - L->e2r[10][l] * br2 + L->e2i[10][l] * bi2;
+        bi1 = bi1 * L->e2r[9][l] + br1 * L->e2i[9][l] - L->e2r[14][l] * bi6 - L->e2i[14][l] * br6
+                - L->e2r[13][l] * bi5 - L->e2i[13][l] * br5 - L->e2r[12][l] * bi4 - L->e2i[12][l]
+                * br4 - L->e2r[10][l] * bi2 - L->e2i[10][l] * br2;
+        br1 = re;
+        re = br0 * L->e2r[0][l] - bi0 * L->e2i[0][l] - L->e2r[6][l] * br6 + L->e2i[6][l] * bi6 -
+                L->e2r[4][l] * br4 + L->e2i[4][l] * bi4 - L->e2r[2][l] * br2 + L->e2i[2][l] * bi2
+                - L->e2r[1][l] * br1 + L->e2i[1][l] * bi1;
+        bi0 = bi0 * L->e2r[0][l] + br0 * L->e2i[0][l] - L->e2r[6][l] * bi6 - L->e2i[6][l] * br6 -
+                L->e2r[4][l] * bi4 - L->e2i[4][l] * br4 - L->e2r[2][l] * bi2 - L->e2i[2][l] * br2
+                - L->e2r[1][l] * bi1 - L->e2i[1][l] * br1;
+        br0 = re;
+        L->z2[0][l] = br0;
+        L->z3[0][l] = bi0;
+        L->z2[1][l] = br1;
+        L->z3[1][l] = bi1;
+        L->z2[2][l] = br2;
+        L->z3[2][l] = bi2;
+        L->z2[3][l] = br3;
+        L->z3[3][l] = bi3;
+        L->z2[4][l] = br4;
+        L->z3[4][l] = bi4;
+        L->z2[5][l] = br5;
+        L->z3[5][l] = bi5;
+        L->z2[6][l] = br6;
+        L->z3[6][l] = bi6;
+        L->z2[7][l] = br7;
+        L->z3[7][l] = bi7;
     }
 }
 
@@ -3901,6 +4359,1332 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of radau5_integrate's loop on every lane. */
+static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    int go[SPEED_CONTROLLED_LANES] = {0};
+    int fresh[SPEED_CONTROLLED_LANES] = {0};
+    int bad[SPEED_CONTROLLED_LANES] = {0};
+    int refac[SPEED_CONTROLLED_LANES] = {0};
+    int sing[SPEED_CONTROLLED_LANES] = {0};
+    int retry[SPEED_CONTROLLED_LANES] = {0};
+    int stop[SPEED_CONTROLLED_LANES] = {0};
+    int iter[SPEED_CONTROLLED_LANES] = {0};
+    int done[SPEED_CONTROLLED_LANES] = {0};
+    int cont[SPEED_CONTROLLED_LANES] = {0};
+    int fail[SPEED_CONTROLLED_LANES] = {0};
+    int ok0[SPEED_CONTROLLED_LANES] = {0};
+    int take[SPEED_CONTROLLED_LANES] = {0};
+    int rej[SPEED_CONTROLLED_LANES] = {0};
+    int lock[SPEED_CONTROLLED_LANES] = {0};
+    int ok[SPEED_CONTROLLED_LANES] = {0};
+    int fin[SPEED_CONTROLLED_LANES] = {0};
+    int keep[SPEED_CONTROLLED_LANES] = {0};
+    int again[SPEED_CONTROLLED_LANES] = {0};
+    int badf[SPEED_CONTROLLED_LANES] = {0};
+    int fresh0[SPEED_CONTROLLED_LANES] = {0};
+    double gamma_h[SPEED_CONTROLLED_LANES] = {0};
+    double alpha_h[SPEED_CONTROLLED_LANES] = {0};
+    double beta_h[SPEED_CONTROLLED_LANES] = {0};
+    double total[SPEED_CONTROLLED_LANES] = {0};
+    double norm[SPEED_CONTROLLED_LANES] = {0};
+    double dyno[SPEED_CONTROLLED_LANES] = {0};
+    double thq[SPEED_CONTROLLED_LANES] = {0};
+    double predicted[SPEED_CONTROLLED_LANES] = {0};
+    double q[SPEED_CONTROLLED_LANES] = {0};
+    double theta_k[SPEED_CONTROLLED_LANES] = {0};
+    double err[SPEED_CONTROLLED_LANES] = {0};
+    double quot[SPEED_CONTROLLED_LANES] = {0};
+    double h_new[SPEED_CONTROLLED_LANES] = {0};
+    double gus[SPEED_CONTROLLED_LANES] = {0};
+    double c1q[SPEED_CONTROLLED_LANES] = {0};
+    double c2q[SPEED_CONTROLLED_LANES] = {0};
+    double c3q[SPEED_CONTROLLED_LANES] = {0};
+    int newt[SPEED_CONTROLLED_LANES] = {0};
+    int outcome[SPEED_CONTROLLED_LANES] = {0};
+    static const int stored[34] = {0, 1, 2, 4, 6, 9, 10, 12, 13, 14, 17, 18, 20, 21, 22, 27, 29,
+            31, 36, 37, 38, 39, 44, 45, 46, 47, 52, 53, 54, 55, 60, 61, 62, 63};
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int e, i, j, l;
+    int need;
+    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
+    atol_e = rtol_e * (atol / rtol);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+
+    /* a lane's first turn: a last step from t0 (m.name_integrate's start) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        fresh0[l] = go[l] && !L->begun[l];
+        L->h[l] = fresh0[l] && L->t[l] + 1.01 * L->h[l] >= t1 ? t1 - L->t[l] : L->h[l];
+        L->ending[l] = fresh0[l] ? L->t[l] + 1.01 * L->h[l] >= t1 : L->ending[l];
+        L->begun[l] = go[l] ? 1 : L->begun[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->scal[i][l] = atol_e + rtol_e * (is_angle[i] * fabs(L->x[i][l]) > 3.141592653589793
+                    ? 3.141592653589793 : fabs(L->x[i][l]));
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        fresh[l] = go[l] && L->need_jac[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->jn);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? SPEED_CONTROLLED_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->fresh_jac[l] = fresh[l] ? 1 : L->fresh_jac[l];
+            L->need_jac[l] = fresh[l] ? 0 : L->need_jac[l];
+            L->need_lu[l] = fresh[l] ? 1 : L->need_lu[l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        L->code[l] = go[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
+                SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? SPEED_CONTROLLED_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        gamma_h[l] = 3.637834252744496 / L->h[l];
+        alpha_h[l] = 2.6810828736277523 / L->h[l];
+        beta_h[l] = 3.0504301992474105 / L->h[l];
+        refac[l] = go[l] && L->need_lu[l];
+        sing[l] = 0;
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= refac[l];
+    }
+    if (need) {
+
+        /* each lane's kept factors, then E1 and E2 for this h on every lane */
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
+            }
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->piv1[i][l] = L->piv[i][l];
+                L->piv2k[i][l] = L->piv2[i][l];
+            }
+        }
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
+            }
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->lu[i * SPEED_CONTROLLED_NX + i][l] = gamma_h[l] - L->J[i * SPEED_CONTROLLED_NX
+                        + i][l];
+                L->e2r[i * SPEED_CONTROLLED_NX + i][l] = alpha_h[l] - L->J[i *
+                        SPEED_CONTROLLED_NX + i][l];
+                L->e2i[i * SPEED_CONTROLLED_NX + i][l] = beta_h[l];
+            }
+        }
+        lu_decompose_lanes(L);
+        lu_decompose_complex_lanes(L);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            sing[l] = refac[l] ? L->zero_pivot[l] : sing[l];
+            L->stats_decompositions[l] = refac[l] ? L->stats_decompositions[l] + 1 :
+                    L->stats_decompositions[l];
+        }
+
+        /* a lane that refactors none: its kept factors back */
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
+            }
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->piv[i][l] = refac[l] ? L->piv[i][l] : L->piv1[i][l];
+                L->piv2[i][l] = refac[l] ? L->piv2[i][l] : L->piv2k[i][l];
+            }
+        }
+    }
+
+    /* a singular E1 or E2: so many in a row stop; else h shrunk */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        retry[l] = refac[l] && sing[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : refac[l] ? 0 : L->singular[l];
+        stop[l] = retry[l] && L->singular[l] == 5;
+        L->code[l] = stop[l] ? SPEED_CONTROLLED_ODE_ERR_SINGULAR : L->code[l];
+        retry[l] = retry[l] && !stop[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->reject[l] = retry[l] ? 1 : L->reject[l];
+        L->ending[l] = retry[l] ? 0 : L->ending[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        L->need_jac[l] = retry[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        L->need_lu[l] = refac[l] && !sing[l] ? 0 : L->need_lu[l];
+        go[l] = go[l] && !(refac[l] && sing[l]);
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* the Newton iterations start from the last step's collocation polynomial */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        c3q[l] = L->h[l] / L->h_old[l];
+        c1q[l] = 0.1550510257216822 * c3q[l];
+        c2q[l] = 0.6449489742783178 * c3q[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            double a1, a2, a3;
+            a1 = c1q[l] * (L->ak1[i][l] + (c1q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c1q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a2 = c2q[l] * (L->ak1[i][l] + (c2q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c2q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a3 = c3q[l] * (L->ak1[i][l] + (c3q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c3q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            L->zs1[i][l] = go[l] ? (L->first[l] ? 0.0 : a1) : L->zs1[i][l];
+            L->zs2[i][l] = go[l] ? (L->first[l] ? 0.0 : a2) : L->zs2[i][l];
+            L->zs3[i][l] = go[l] ? (L->first[l] ? 0.0 : a3) : L->zs3[i][l];
+            L->w1[i][l] = go[l] ? (L->first[l] ? 0.0 : 4.325579890063155 * a1 +
+                    0.33919925181580984 * a2 + 0.5417705399358749 * a3) : L->w1[i][l];
+            L->w2[i][l] = go[l] ? (L->first[l] ? 0.0 : -4.178718591551905 * a1 -
+                    0.32768282076106237 * a2 + 0.47662355450055044 * a3) : L->w2[i][l];
+            L->w3[i][l] = go[l] ? (L->first[l] ? 0.0 : -0.5028726349457868 * a1 +
+                    2.571926949855605 * a2 - 0.5960392048282249 * a3) : L->w3[i][l];
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        outcome[l] = 0;
+        L->rate[l] = go[l] ? pow(dmax(L->rate[l], 0.5 * DBL_EPSILON), 0.8) : L->rate[l];
+        L->theta[l] = go[l] ? 1e-3 : L->theta[l];
+        newt[l] = 0;
+        iter[l] = go[l];
+        done[l] = 0;
+    }
+    for (;;) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            iter[l] = iter[l] && outcome[l] == 0 && !done[l];
+        }
+        need = 0;
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (!need) {
+            break;
+        }
+        need = 0;
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (need) {
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs1[i][l] : L->y[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.1550510257216822 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->k[0]);
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs2[i][l] : L->y[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.6449489742783178 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z2);
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs3[i][l] : L->y[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->ts[l] = L->t[l] + L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z3);
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->k[0][i][l];
+                    a2 = L->z2[i][l];
+                    a3 = L->z3[i][l];
+                    L->k[0][i][l] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 +
+                            0.5417705399358749 * a3 - gamma_h[l] * L->w1[i][l];
+                    L->z2[i][l] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 +
+                            0.47662355450055044 * a3 - alpha_h[l] * L->w2[i][l] + beta_h[l] *
+                            L->w3[i][l];
+                    L->z3[i][l] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 -
+                            0.5960392048282249 * a3 - alpha_h[l] * L->w3[i][l] - beta_h[l] *
+                            L->w2[i][l];
+                }
+            }
+            lu_solve_lanes(L, 0);
+            lu_solve_complex_lanes(L);
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                total[l] = iter[l] ? 0.0 : total[l];
+            }
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    double s1, s2, s3;
+                    s1 = L->k[0][i][l] / L->scal[i][l];
+                    s2 = L->z2[i][l] / L->scal[i][l];
+                    s3 = L->z3[i][l] / L->scal[i][l];
+                    total[l] = iter[l] ? total[l] + (s1 * s1 + s2 * s2 + s3 * s3) : total[l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                dyno[l] = iter[l] ? sqrt(total[l] / (3 * SPEED_CONTROLLED_NX)) : dyno[l];
+                L->stats_rhs_calls[l] = iter[l] ? L->stats_rhs_calls[l] + 3 : L->stats_rhs_calls[l];
+                newt[l] = iter[l] ? newt[l] + 1 : newt[l];
+                bad[l] = iter[l] ? !(fabs(dyno[l]) <= DBL_MAX) : bad[l];
+                L->nonfinite[l] = iter[l] && bad[l] ? 1 : L->nonfinite[l];
+                outcome[l] = iter[l] && bad[l] ? 2 : outcome[l];
+                thq[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? dyno[l] /
+                        L->dyno_old[l] : thq[l];
+                L->theta[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? (newt[l] == 2
+                        ? thq[l] : sqrt(thq[l] * L->theta_old[l])) : L->theta[l];
+                L->theta_old[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? thq[l] :
+                        L->theta_old[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && !(L->theta[l]
+                        < 0.99) ? 2 : outcome[l];
+                L->rate[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? L->theta[l] / (1.0 - L->theta[l]) : L->rate[l];
+                theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? 1.0 : theta_k[l];
+            }
+            for (j = 0; j < 6; ++j) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) &&
+                            L->theta[l] < 0.99 ? (j >= newt[l] ? theta_k[l] * L->theta[l] :
+                            theta_k[l]) : theta_k[l];
+                }
+            }
+            /* pow, log, exp: scalar calls, as the single trajectory's */
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                predicted[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l]
+                        < 0.99 ? L->rate[l] * dyno[l] * theta_k[l] / newton_tol : predicted[l];
+                q[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] < 0.99
+                        && predicted[l] >= 1.0 ? dmax(1e-4, dmin(20.0, predicted[l])) : q[l];
+                L->h[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? L->h[l] * (0.8 * pow(q[l],
+                        -1.0 / (10 - newt[l]))) : L->h[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? 1 : outcome[l];
+                cont[l] = iter[l] ? outcome[l] == 0 : cont[l];
+                L->dyno_old[l] = iter[l] && cont[l] ? dmax(dyno[l],
+                        0.5 * DBL_EPSILON) : L->dyno_old[l];
+            }
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->w1[i][l] + L->k[0][i][l];
+                    a2 = L->w2[i][l] + L->z2[i][l];
+                    a3 = L->w3[i][l] + L->z3[i][l];
+                    L->w1[i][l] = iter[l] && cont[l] ? a1 : L->w1[i][l];
+                    L->w2[i][l] = iter[l] && cont[l] ? a2 : L->w2[i][l];
+                    L->w3[i][l] = iter[l] && cont[l] ? a3 : L->w3[i][l];
+                    L->zs1[i][l] = iter[l] && cont[l] ? 0.09123239487089295 * a1 -
+                            0.1412552950209542 * a2 - 0.030029194105147424 * a3 : L->zs1[i][l];
+                    L->zs2[i][l] = iter[l] && cont[l] ? 0.241717932707107 * a1 +
+                            0.20412935229379994 * a2 + 0.3829421127572619 * a3 : L->zs2[i][l];
+                    L->zs3[i][l] = iter[l] && cont[l] ? 0.966048182615093 * a1 + a2 : L->zs3[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                done[l] = iter[l] ? cont[l] && !(L->rate[l] * dyno[l] > newton_tol) : done[l];
+                outcome[l] = iter[l] && (cont[l] && !done[l] && newt[l] >= 7) ? 2 : outcome[l];
+            }
+        }
+    }
+
+    /* the error test (radau5's error estimate) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        ok0[l] = go[l] && outcome[l] == 0;
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->eg[i][l] = (-10.048809399827416 * L->zs1[i][l] + 1.382142733160749 * L->zs2[i][l]
+                    - 0.3333333333333333 * L->zs3[i][l]) / L->h[l];
+            L->k[0][i][l] = L->f0[i][l] + L->eg[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        total[l] = 0.0;
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            total[l] = total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] / L->scal[i][l]);
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        norm[l] = sqrt(total[l] / SPEED_CONTROLLED_NX);
+        again[l] = ok0[l] && norm[l] >= 1.0 && (L->first[l] | L->reject[l]);
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= again[l];
+    }
+    if (need) {
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->y[i][l] = again[l] ? L->x[i][l] + L->k[0][i][l] : L->y[i][l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[0]);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->stats_rhs_calls[l] = again[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->k[0][i][l] = L->k[0][i][l] + L->eg[i][l];
+            }
+        }
+        lu_solve_lanes(L, 0);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            total[l] = again[l] ? 0.0 : total[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                total[l] = again[l] ? total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] /
+                        L->scal[i][l]) : total[l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            norm[l] = again[l] ? sqrt(total[l] / SPEED_CONTROLLED_NX) : norm[l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        err[l] = norm[l] < 1e-10 ? 1e-10 : norm[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->dx[i][l] = L->zs3[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        fin[l] = ok0[l] && err[l] < 1.0 && !L->ending[l];
+        badf[l] = 0;
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= fin[l];
+    }
+    if (need) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->stats_rhs_calls[l] = fin[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                badf[l] = fin[l] ? (badf[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : badf[l];
+            }
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        bad[l] = fin[l] ? badf[l] : !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->nonfinite[l] = ok0[l] ? bad[l] : L->nonfinite[l];
+        outcome[l] = ok0[l] && bad[l] ? 2 : outcome[l];
+    }
+
+    /* Newton failed or too slow, or a NaN or Inf: rejected */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        fail[l] = go[l] && outcome[l] != 0;
+        L->stats_rejected[l] = L->stats_rejected[l] + (fail[l] ? 1 : 0);
+        L->reject[l] = fail[l] ? 1 : L->reject[l];
+        L->ending[l] = fail[l] ? 0 : L->ending[l];
+        L->h[l] = fail[l] && outcome[l] == 2 ? L->h[l] * 0.5 : L->h[l];
+        L->need_lu[l] = fail[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = fail[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        go[l] = go[l] && !fail[l];
+        quot[l] = dmax(0.125, dmin(5.0, pow(err[l], 0.25) / dmin(0.9, 13.5 / (newt[l] + 14))));  /* h_new = h / quot */
+        h_new[l] = L->h[l] / quot[l];
+        take[l] = go[l] && err[l] < 1.0;
+        rej[l] = go[l] && !(err[l] < 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(speed_controlled_cos_lanes(L->xnew[1][l])) <
+                SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS : 0) || fabs(gimbal_interval(L->x[1][l]) -
+                gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        L->first[l] = ok[l] ? 0 : L->first[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        quot[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(quot[l], dmax(0.125, dmin(5.0,
+                gus[l]))) : quot[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        h_new[l] = L->h[l] / quot[l];
+        L->h_old[l] = ok[l] ? L->h[l] : L->h_old[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            double ak;
+            ak = (L->zs2[i][l] - L->zs1[i][l]) / 0.4898979485566356;
+            L->ak1[i][l] = ok[l] ? (L->zs3[i][l] - L->zs2[i][l]) / 0.35505102572168223 :
+                    L->ak1[i][l];
+            L->ak2[i][l] = ok[l] ? (L->ak1[i][l] - ak) / 0.8449489742783178 : L->ak2[i][l];
+            L->ak3[i][l] = ok[l] ? L->ak2[i][l] - (ak - L->zs1[i][l] / 0.1550510257216822) /
+                    0.6449489742783178 : L->ak3[i][l];
+        }
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->t[l] = ok[l] ? (L->ending[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                L->ending[l] ? SPEED_CONTROLLED_ODE_OK : L->code[l];
+    }
+
+    /* after an accepted step that is not the last: the next h, J and factors */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        cont[l] = ok[l] && !L->ending[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->f0[i][l] = cont[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->fresh_jac[l] = cont[l] ? 0 : L->fresh_jac[l];
+        h_new[l] = dmin(h_new[l], L->span[l]);
+        h_new[l] = L->reject[l] ? dmin(h_new[l], L->h[l]) : h_new[l];
+        L->reject[l] = cont[l] ? 0 : L->reject[l];
+        fin[l] = L->t[l] + 1.01 * h_new[l] >= t1;
+        keep[l] = !fin[l] && (L->theta[l] <= 1e-3 && h_new[l] >= 1.0 * L->h[l] && h_new[l] <= 1.2
+                * L->h[l]);
+        L->h[l] = cont[l] ? (fin[l] ? t1 - L->t[l] : keep[l] ? L->h[l] : h_new[l]) : L->h[l];
+        L->ending[l] = cont[l] && fin[l] ? 1 : L->ending[l];
+        L->need_jac[l] = cont[l] && !keep[l] ? L->theta[l] > 1e-3 : L->need_jac[l];
+        L->need_lu[l] = cont[l] && !keep[l] ? 1 : L->need_lu[l];
+    }
+
+    /* a rejected step */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->reject[l] = rej[l] ? 1 : L->reject[l];
+        L->ending[l] = rej[l] ? 0 : L->ending[l];
+        L->h[l] = rej[l] ? (L->first[l] ? L->h[l] * 0.1 : h_new[l]) : L->h[l];
+        L->need_lu[l] = rej[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = rej[l] ? !L->fresh_jac[l] : L->need_jac[l];
+    }
+}
+
+/* One turn of radau5_grid's loop on every lane. */
+static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    int go[SPEED_CONTROLLED_LANES] = {0};
+    int fresh[SPEED_CONTROLLED_LANES] = {0};
+    int bad[SPEED_CONTROLLED_LANES] = {0};
+    int refac[SPEED_CONTROLLED_LANES] = {0};
+    int sing[SPEED_CONTROLLED_LANES] = {0};
+    int retry[SPEED_CONTROLLED_LANES] = {0};
+    int stop[SPEED_CONTROLLED_LANES] = {0};
+    int iter[SPEED_CONTROLLED_LANES] = {0};
+    int done[SPEED_CONTROLLED_LANES] = {0};
+    int cont[SPEED_CONTROLLED_LANES] = {0};
+    int fail[SPEED_CONTROLLED_LANES] = {0};
+    int ok0[SPEED_CONTROLLED_LANES] = {0};
+    int take[SPEED_CONTROLLED_LANES] = {0};
+    int rej[SPEED_CONTROLLED_LANES] = {0};
+    int lock[SPEED_CONTROLLED_LANES] = {0};
+    int ok[SPEED_CONTROLLED_LANES] = {0};
+    int fin[SPEED_CONTROLLED_LANES] = {0};
+    int keep[SPEED_CONTROLLED_LANES] = {0};
+    int again[SPEED_CONTROLLED_LANES] = {0};
+    int badf[SPEED_CONTROLLED_LANES] = {0};
+    int fresh0[SPEED_CONTROLLED_LANES] = {0};
+    double gamma_h[SPEED_CONTROLLED_LANES] = {0};
+    double alpha_h[SPEED_CONTROLLED_LANES] = {0};
+    double beta_h[SPEED_CONTROLLED_LANES] = {0};
+    double total[SPEED_CONTROLLED_LANES] = {0};
+    double norm[SPEED_CONTROLLED_LANES] = {0};
+    double dyno[SPEED_CONTROLLED_LANES] = {0};
+    double thq[SPEED_CONTROLLED_LANES] = {0};
+    double predicted[SPEED_CONTROLLED_LANES] = {0};
+    double q[SPEED_CONTROLLED_LANES] = {0};
+    double theta_k[SPEED_CONTROLLED_LANES] = {0};
+    double err[SPEED_CONTROLLED_LANES] = {0};
+    double quot[SPEED_CONTROLLED_LANES] = {0};
+    double h_new[SPEED_CONTROLLED_LANES] = {0};
+    double gus[SPEED_CONTROLLED_LANES] = {0};
+    double c1q[SPEED_CONTROLLED_LANES] = {0};
+    double c2q[SPEED_CONTROLLED_LANES] = {0};
+    double c3q[SPEED_CONTROLLED_LANES] = {0};
+    int newt[SPEED_CONTROLLED_LANES] = {0};
+    int outcome[SPEED_CONTROLLED_LANES] = {0};
+    static const int stored[34] = {0, 1, 2, 4, 6, 9, 10, 12, 13, 14, 17, 18, 20, 21, 22, 27, 29,
+            31, 36, 37, 38, 39, 44, 45, 46, 47, 52, 53, 54, 55, 60, 61, 62, 63};
+    double frac[SPEED_CONTROLLED_LANES] = {0};
+    int due[SPEED_CONTROLLED_LANES];
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int e, i, j, l;
+    int need;
+    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
+    atol_e = rtol_e * (atol / rtol);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+
+    /* a lane's first turn: a last step from t0 (m.name_integrate's start) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        fresh0[l] = go[l] && !L->begun[l];
+        L->h[l] = fresh0[l] && L->t[l] + 1.01 * L->h[l] >= t1 ? t1 - L->t[l] : L->h[l];
+        L->ending[l] = fresh0[l] ? L->t[l] + 1.01 * L->h[l] >= t1 : L->ending[l];
+        L->begun[l] = go[l] ? 1 : L->begun[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->scal[i][l] = atol_e + rtol_e * (is_angle[i] * fabs(L->x[i][l]) > 3.141592653589793
+                    ? 3.141592653589793 : fabs(L->x[i][l]));
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        fresh[l] = go[l] && L->need_jac[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->jn);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX * SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? SPEED_CONTROLLED_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->fresh_jac[l] = fresh[l] ? 1 : L->fresh_jac[l];
+            L->need_jac[l] = fresh[l] ? 0 : L->need_jac[l];
+            L->need_lu[l] = fresh[l] ? 1 : L->need_lu[l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        L->code[l] = go[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? SPEED_CONTROLLED_ODE_ERR_NONFINITE :
+                SPEED_CONTROLLED_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? SPEED_CONTROLLED_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        gamma_h[l] = 3.637834252744496 / L->h[l];
+        alpha_h[l] = 2.6810828736277523 / L->h[l];
+        beta_h[l] = 3.0504301992474105 / L->h[l];
+        refac[l] = go[l] && L->need_lu[l];
+        sing[l] = 0;
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= refac[l];
+    }
+    if (need) {
+
+        /* each lane's kept factors, then E1 and E2 for this h on every lane */
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
+            }
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->piv1[i][l] = L->piv[i][l];
+                L->piv2k[i][l] = L->piv2[i][l];
+            }
+        }
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
+            }
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->lu[i * SPEED_CONTROLLED_NX + i][l] = gamma_h[l] - L->J[i * SPEED_CONTROLLED_NX
+                        + i][l];
+                L->e2r[i * SPEED_CONTROLLED_NX + i][l] = alpha_h[l] - L->J[i *
+                        SPEED_CONTROLLED_NX + i][l];
+                L->e2i[i * SPEED_CONTROLLED_NX + i][l] = beta_h[l];
+            }
+        }
+        lu_decompose_lanes(L);
+        lu_decompose_complex_lanes(L);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            sing[l] = refac[l] ? L->zero_pivot[l] : sing[l];
+            L->stats_decompositions[l] = refac[l] ? L->stats_decompositions[l] + 1 :
+                    L->stats_decompositions[l];
+        }
+
+        /* a lane that refactors none: its kept factors back */
+        for (e = 0; e < 34; ++e) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
+            }
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->piv[i][l] = refac[l] ? L->piv[i][l] : L->piv1[i][l];
+                L->piv2[i][l] = refac[l] ? L->piv2[i][l] : L->piv2k[i][l];
+            }
+        }
+    }
+
+    /* a singular E1 or E2: so many in a row stop; else h shrunk */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        retry[l] = refac[l] && sing[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : refac[l] ? 0 : L->singular[l];
+        stop[l] = retry[l] && L->singular[l] == 5;
+        L->code[l] = stop[l] ? SPEED_CONTROLLED_ODE_ERR_SINGULAR : L->code[l];
+        retry[l] = retry[l] && !stop[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->reject[l] = retry[l] ? 1 : L->reject[l];
+        L->ending[l] = retry[l] ? 0 : L->ending[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        L->need_jac[l] = retry[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        L->need_lu[l] = refac[l] && !sing[l] ? 0 : L->need_lu[l];
+        go[l] = go[l] && !(refac[l] && sing[l]);
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* the Newton iterations start from the last step's collocation polynomial */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        c3q[l] = L->h[l] / L->h_old[l];
+        c1q[l] = 0.1550510257216822 * c3q[l];
+        c2q[l] = 0.6449489742783178 * c3q[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            double a1, a2, a3;
+            a1 = c1q[l] * (L->ak1[i][l] + (c1q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c1q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a2 = c2q[l] * (L->ak1[i][l] + (c2q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c2q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a3 = c3q[l] * (L->ak1[i][l] + (c3q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c3q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            L->zs1[i][l] = go[l] ? (L->first[l] ? 0.0 : a1) : L->zs1[i][l];
+            L->zs2[i][l] = go[l] ? (L->first[l] ? 0.0 : a2) : L->zs2[i][l];
+            L->zs3[i][l] = go[l] ? (L->first[l] ? 0.0 : a3) : L->zs3[i][l];
+            L->w1[i][l] = go[l] ? (L->first[l] ? 0.0 : 4.325579890063155 * a1 +
+                    0.33919925181580984 * a2 + 0.5417705399358749 * a3) : L->w1[i][l];
+            L->w2[i][l] = go[l] ? (L->first[l] ? 0.0 : -4.178718591551905 * a1 -
+                    0.32768282076106237 * a2 + 0.47662355450055044 * a3) : L->w2[i][l];
+            L->w3[i][l] = go[l] ? (L->first[l] ? 0.0 : -0.5028726349457868 * a1 +
+                    2.571926949855605 * a2 - 0.5960392048282249 * a3) : L->w3[i][l];
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        outcome[l] = 0;
+        L->rate[l] = go[l] ? pow(dmax(L->rate[l], 0.5 * DBL_EPSILON), 0.8) : L->rate[l];
+        L->theta[l] = go[l] ? 1e-3 : L->theta[l];
+        newt[l] = 0;
+        iter[l] = go[l];
+        done[l] = 0;
+    }
+    for (;;) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            iter[l] = iter[l] && outcome[l] == 0 && !done[l];
+        }
+        need = 0;
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (!need) {
+            break;
+        }
+        need = 0;
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (need) {
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs1[i][l] : L->y[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.1550510257216822 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->k[0]);
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs2[i][l] : L->y[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.6449489742783178 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z2);
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs3[i][l] : L->y[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->ts[l] = L->t[l] + L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z3);
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->k[0][i][l];
+                    a2 = L->z2[i][l];
+                    a3 = L->z3[i][l];
+                    L->k[0][i][l] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 +
+                            0.5417705399358749 * a3 - gamma_h[l] * L->w1[i][l];
+                    L->z2[i][l] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 +
+                            0.47662355450055044 * a3 - alpha_h[l] * L->w2[i][l] + beta_h[l] *
+                            L->w3[i][l];
+                    L->z3[i][l] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 -
+                            0.5960392048282249 * a3 - alpha_h[l] * L->w3[i][l] - beta_h[l] *
+                            L->w2[i][l];
+                }
+            }
+            lu_solve_lanes(L, 0);
+            lu_solve_complex_lanes(L);
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                total[l] = iter[l] ? 0.0 : total[l];
+            }
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    double s1, s2, s3;
+                    s1 = L->k[0][i][l] / L->scal[i][l];
+                    s2 = L->z2[i][l] / L->scal[i][l];
+                    s3 = L->z3[i][l] / L->scal[i][l];
+                    total[l] = iter[l] ? total[l] + (s1 * s1 + s2 * s2 + s3 * s3) : total[l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                dyno[l] = iter[l] ? sqrt(total[l] / (3 * SPEED_CONTROLLED_NX)) : dyno[l];
+                L->stats_rhs_calls[l] = iter[l] ? L->stats_rhs_calls[l] + 3 : L->stats_rhs_calls[l];
+                newt[l] = iter[l] ? newt[l] + 1 : newt[l];
+                bad[l] = iter[l] ? !(fabs(dyno[l]) <= DBL_MAX) : bad[l];
+                L->nonfinite[l] = iter[l] && bad[l] ? 1 : L->nonfinite[l];
+                outcome[l] = iter[l] && bad[l] ? 2 : outcome[l];
+                thq[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? dyno[l] /
+                        L->dyno_old[l] : thq[l];
+                L->theta[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? (newt[l] == 2
+                        ? thq[l] : sqrt(thq[l] * L->theta_old[l])) : L->theta[l];
+                L->theta_old[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? thq[l] :
+                        L->theta_old[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && !(L->theta[l]
+                        < 0.99) ? 2 : outcome[l];
+                L->rate[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? L->theta[l] / (1.0 - L->theta[l]) : L->rate[l];
+                theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? 1.0 : theta_k[l];
+            }
+            for (j = 0; j < 6; ++j) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) &&
+                            L->theta[l] < 0.99 ? (j >= newt[l] ? theta_k[l] * L->theta[l] :
+                            theta_k[l]) : theta_k[l];
+                }
+            }
+            /* pow, log, exp: scalar calls, as the single trajectory's */
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                predicted[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l]
+                        < 0.99 ? L->rate[l] * dyno[l] * theta_k[l] / newton_tol : predicted[l];
+                q[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] < 0.99
+                        && predicted[l] >= 1.0 ? dmax(1e-4, dmin(20.0, predicted[l])) : q[l];
+                L->h[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? L->h[l] * (0.8 * pow(q[l],
+                        -1.0 / (10 - newt[l]))) : L->h[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? 1 : outcome[l];
+                cont[l] = iter[l] ? outcome[l] == 0 : cont[l];
+                L->dyno_old[l] = iter[l] && cont[l] ? dmax(dyno[l],
+                        0.5 * DBL_EPSILON) : L->dyno_old[l];
+            }
+            for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                SPEED_CONTROLLED_SIMD
+                for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->w1[i][l] + L->k[0][i][l];
+                    a2 = L->w2[i][l] + L->z2[i][l];
+                    a3 = L->w3[i][l] + L->z3[i][l];
+                    L->w1[i][l] = iter[l] && cont[l] ? a1 : L->w1[i][l];
+                    L->w2[i][l] = iter[l] && cont[l] ? a2 : L->w2[i][l];
+                    L->w3[i][l] = iter[l] && cont[l] ? a3 : L->w3[i][l];
+                    L->zs1[i][l] = iter[l] && cont[l] ? 0.09123239487089295 * a1 -
+                            0.1412552950209542 * a2 - 0.030029194105147424 * a3 : L->zs1[i][l];
+                    L->zs2[i][l] = iter[l] && cont[l] ? 0.241717932707107 * a1 +
+                            0.20412935229379994 * a2 + 0.3829421127572619 * a3 : L->zs2[i][l];
+                    L->zs3[i][l] = iter[l] && cont[l] ? 0.966048182615093 * a1 + a2 : L->zs3[i][l];
+                }
+            }
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                done[l] = iter[l] ? cont[l] && !(L->rate[l] * dyno[l] > newton_tol) : done[l];
+                outcome[l] = iter[l] && (cont[l] && !done[l] && newt[l] >= 7) ? 2 : outcome[l];
+            }
+        }
+    }
+
+    /* the error test (radau5's error estimate) */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        ok0[l] = go[l] && outcome[l] == 0;
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->eg[i][l] = (-10.048809399827416 * L->zs1[i][l] + 1.382142733160749 * L->zs2[i][l]
+                    - 0.3333333333333333 * L->zs3[i][l]) / L->h[l];
+            L->k[0][i][l] = L->f0[i][l] + L->eg[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        total[l] = 0.0;
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            total[l] = total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] / L->scal[i][l]);
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        norm[l] = sqrt(total[l] / SPEED_CONTROLLED_NX);
+        again[l] = ok0[l] && norm[l] >= 1.0 && (L->first[l] | L->reject[l]);
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= again[l];
+    }
+    if (need) {
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->y[i][l] = again[l] ? L->x[i][l] + L->k[0][i][l] : L->y[i][l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[0]);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->stats_rhs_calls[l] = again[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->k[0][i][l] = L->k[0][i][l] + L->eg[i][l];
+            }
+        }
+        lu_solve_lanes(L, 0);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            total[l] = again[l] ? 0.0 : total[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                total[l] = again[l] ? total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] /
+                        L->scal[i][l]) : total[l];
+            }
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            norm[l] = again[l] ? sqrt(total[l] / SPEED_CONTROLLED_NX) : norm[l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        err[l] = norm[l] < 1e-10 ? 1e-10 : norm[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->dx[i][l] = L->zs3[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        fin[l] = ok0[l] && err[l] < 1.0 && !L->ending[l];
+        badf[l] = 0;
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= fin[l];
+    }
+    if (need) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->stats_rhs_calls[l] = fin[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                badf[l] = fin[l] ? (badf[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : badf[l];
+            }
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        bad[l] = fin[l] ? badf[l] : !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->nonfinite[l] = ok0[l] ? bad[l] : L->nonfinite[l];
+        outcome[l] = ok0[l] && bad[l] ? 2 : outcome[l];
+    }
+
+    /* Newton failed or too slow, or a NaN or Inf: rejected */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        fail[l] = go[l] && outcome[l] != 0;
+        L->stats_rejected[l] = L->stats_rejected[l] + (fail[l] ? 1 : 0);
+        L->reject[l] = fail[l] ? 1 : L->reject[l];
+        L->ending[l] = fail[l] ? 0 : L->ending[l];
+        L->h[l] = fail[l] && outcome[l] == 2 ? L->h[l] * 0.5 : L->h[l];
+        L->need_lu[l] = fail[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = fail[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        go[l] = go[l] && !fail[l];
+        quot[l] = dmax(0.125, dmin(5.0, pow(err[l], 0.25) / dmin(0.9, 13.5 / (newt[l] + 14))));  /* h_new = h / quot */
+        h_new[l] = L->h[l] / quot[l];
+        take[l] = go[l] && err[l] < 1.0;
+        rej[l] = go[l] && !(err[l] < 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(speed_controlled_cos_lanes(L->xnew[1][l])) <
+                SPEED_CONTROLLED_ODE_GIMBAL_LOCK_COS : 0) || fabs(gimbal_interval(L->x[1][l]) -
+                gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        L->first[l] = ok[l] ? 0 : L->first[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        quot[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(quot[l], dmax(0.125, dmin(5.0,
+                gus[l]))) : quot[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        h_new[l] = L->h[l] / quot[l];
+        L->h_old[l] = ok[l] ? L->h[l] : L->h_old[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            double ak;
+            ak = (L->zs2[i][l] - L->zs1[i][l]) / 0.4898979485566356;
+            L->ak1[i][l] = ok[l] ? (L->zs3[i][l] - L->zs2[i][l]) / 0.35505102572168223 :
+                    L->ak1[i][l];
+            L->ak2[i][l] = ok[l] ? (L->ak1[i][l] - ak) / 0.8449489742783178 : L->ak2[i][l];
+            L->ak3[i][l] = ok[l] ? L->ak2[i][l] - (ak - L->zs1[i][l] / 0.1550510257216822) /
+                    0.6449489742783178 : L->ak3[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (L->ending[l] ? t1 :
+                L->t[l] + L->h[l]));
+    }
+    for (;;) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (L->ending[l] ? t1 :
+                    L->t[l] + L->h[l]));
+        }
+        need = 0;
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - (L->ending[l] ? t1 : L->t[l] + L->h[l])) /
+                    L->h[l] : frac[l];
+        }
+        for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+            SPEED_CONTROLLED_SIMD
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                L->y[i][l] = L->xnew[i][l] + frac[l] * (L->ak1[i][l] + (frac[l] +
+                        0.35505102572168223) * (L->ak2[i][l] + (frac[l] + 0.8449489742783178) *
+                        L->ak3[i][l]));
+            }
+        }
+        need = 0;
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+                if (due[l]) {
+                    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->t[l] = ok[l] ? (L->ending[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? SPEED_CONTROLLED_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                L->ending[l] ? SPEED_CONTROLLED_ODE_OK : L->code[l];
+    }
+
+    /* after an accepted step that is not the last: the next h, J and factors */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        cont[l] = ok[l] && !L->ending[l];
+    }
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        SPEED_CONTROLLED_SIMD
+        for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+            L->f0[i][l] = cont[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->fresh_jac[l] = cont[l] ? 0 : L->fresh_jac[l];
+        h_new[l] = dmin(h_new[l], L->span[l]);
+        h_new[l] = L->reject[l] ? dmin(h_new[l], L->h[l]) : h_new[l];
+        L->reject[l] = cont[l] ? 0 : L->reject[l];
+        fin[l] = L->t[l] + 1.01 * h_new[l] >= t1;
+        keep[l] = !fin[l] && (L->theta[l] <= 1e-3 && h_new[l] >= 1.0 * L->h[l] && h_new[l] <= 1.2
+                * L->h[l]);
+        L->h[l] = cont[l] ? (fin[l] ? t1 - L->t[l] : keep[l] ? L->h[l] : h_new[l]) : L->h[l];
+        L->ending[l] = cont[l] && fin[l] ? 1 : L->ending[l];
+        L->need_jac[l] = cont[l] && !keep[l] ? L->theta[l] > 1e-3 : L->need_jac[l];
+        L->need_lu[l] = cont[l] && !keep[l] ? 1 : L->need_lu[l];
+    }
+
+    /* a rejected step */
+    SPEED_CONTROLLED_SIMD
+    for (l = 0; l < SPEED_CONTROLLED_LANES; ++l) {
+        L->reject[l] = rej[l] ? 1 : L->reject[l];
+        L->ending[l] = rej[l] ? 0 : L->ending[l];
+        L->h[l] = rej[l] ? (L->first[l] ? L->h[l] * 0.1 : h_new[l]) : L->h[l];
+        L->need_lu[l] = rej[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = rej[l] ? !L->fresh_jac[l] : L->need_jac[l];
+    }
+}
+
 /* The normalized Taylor coefficients of x and of the rhs's 60 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
@@ -4820,6 +6604,24 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     L->err_acc[l] = 1e-2;
     L->singular[l] = 0;
     L->new_point[l] = 1;
+    L->h_old[l] = 1.0;
+    L->rate[l] = 1.0;
+    L->theta_old[l] = 1.0;
+    L->dyno_old[l] = 1.0;
+    L->first[l] = 1;
+    L->reject[l] = 0;
+    L->fresh_jac[l] = 0;
+    L->need_jac[l] = 1;
+    L->need_lu[l] = 1;
+    L->begun[l] = 0;
+    L->ending[l] = 0;
+    L->span[l] = t1 - t0;
+    #pragma GCC unroll 1
+    for (i = 0; i < SPEED_CONTROLLED_NX; ++i) {
+        L->ak1[i][l] = 0.0;
+        L->ak2[i][l] = 0.0;
+        L->ak3[i][l] = 0.0;
+    }
     L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
@@ -7501,7 +9303,9 @@ int speed_controlled_radau5_grid(long ntimes, const double *times, double *x, co
             (double (*)[SPEED_CONTROLLED_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t speed_controlled_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                           const double *c, double rtol, double atol, double h0,
                                           long max_steps, double *out,
@@ -7509,6 +9313,11 @@ size_t speed_controlled_radau5_grid_batch(size_t n, long ntimes, const double *t
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(radau5_grid_step_lanes, 5, SPEED_CONTROLLED_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[SPEED_CONTROLLED_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -8729,13 +10538,18 @@ size_t speed_controlled_rodas4_batch(size_t n, double t0, double t1, double *x, 
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. SPEED_CONTROLLED_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t speed_controlled_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
                                      double rtol, double atol, double h0, long max_steps,
                                      speed_controlled_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(radau5_step_lanes, 5, SPEED_CONTROLLED_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

@@ -3644,6 +3644,31 @@ struct VSCMG3_ALIGNED lanes {
     double err_acc[VSCMG3_LANES];
     long stats_jac_calls[VSCMG3_LANES];
     long stats_decompositions[VSCMG3_LANES];
+    double jn[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double e1[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double e2rk[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double e2ik[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double e2r[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double e2i[VSCMG3_NX * VSCMG3_NX][VSCMG3_LANES];
+    double z2[VSCMG3_NX][VSCMG3_LANES];
+    double z3[VSCMG3_NX][VSCMG3_LANES];
+    double zs1[VSCMG3_NX][VSCMG3_LANES];
+    double zs2[VSCMG3_NX][VSCMG3_LANES];
+    double zs3[VSCMG3_NX][VSCMG3_LANES];
+    double w1[VSCMG3_NX][VSCMG3_LANES];
+    double w2[VSCMG3_NX][VSCMG3_LANES];
+    double w3[VSCMG3_NX][VSCMG3_LANES];
+    double ak1[VSCMG3_NX][VSCMG3_LANES];
+    double ak2[VSCMG3_NX][VSCMG3_LANES];
+    double ak3[VSCMG3_NX][VSCMG3_LANES];
+    double scal[VSCMG3_NX][VSCMG3_LANES];
+    double eg[VSCMG3_NX][VSCMG3_LANES];
+    double h_old[VSCMG3_LANES];
+    double rate[VSCMG3_LANES];
+    double theta[VSCMG3_LANES];
+    double theta_old[VSCMG3_LANES];
+    double dyno_old[VSCMG3_LANES];
+    double span[VSCMG3_LANES];
     double cap[VSCMG3_LANES];
     double tay[21][81][VSCMG3_LANES];
     double acc[VSCMG3_NX][VSCMG3_LANES];
@@ -3656,6 +3681,16 @@ struct VSCMG3_ALIGNED lanes {
     int zero_pivot[VSCMG3_LANES];
     int new_point[VSCMG3_LANES];
     int singular[VSCMG3_LANES];
+    int piv2[VSCMG3_NX][VSCMG3_LANES];
+    int piv1[VSCMG3_NX][VSCMG3_LANES];
+    int piv2k[VSCMG3_NX][VSCMG3_LANES];
+    int ending[VSCMG3_LANES];
+    int first[VSCMG3_LANES];
+    int reject[VSCMG3_LANES];
+    int fresh_jac[VSCMG3_LANES];
+    int need_jac[VSCMG3_LANES];
+    int need_lu[VSCMG3_LANES];
+    int begun[VSCMG3_LANES];
     long ntimes;
     const double *times;
     double (*out)[VSCMG3_NX];
@@ -4621,6 +4656,655 @@ static void lu_solve_lanes(struct lanes *L, int s)
         L->k[s][12][l] = b12;
         L->k[s][13][l] = b13;
         L->k[s][14][l] = b14;
+    }
+}
+
+/* lu_decompose_complex on every lane's e2r + i e2i; a zero pivot or-ed into zero_pivot. */
+static void lu_decompose_complex_lanes(struct lanes *L)
+{
+    int p[VSCMG3_LANES];
+    double best[VSCMG3_LANES];
+    double re[VSCMG3_LANES];
+    double im[VSCMG3_LANES];
+    double r[VSCMG3_LANES];
+    double d[VSCMG3_LANES];
+    double lr[VSCMG3_LANES];
+    double li[VSCMG3_LANES];
+    double ur[VSCMG3_LANES];
+    double ui[VSCMG3_LANES];
+    int col, i, j, l, q;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->piv2[0][l] = 0;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[0][l]) + fabs(L->e2i[0][l]) > 0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        re[l] = L->e2r[0][l];
+        im[l] = L->e2i[0][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[0][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[0][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        ur[l] = L->e2r[1][l];
+        ui[l] = L->e2i[1][l];
+        L->e2r[1][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[1][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        ur[l] = L->e2r[2][l];
+        ui[l] = L->e2i[2][l];
+        L->e2r[2][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[2][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        ur[l] = L->e2r[6][l];
+        ui[l] = L->e2i[6][l];
+        L->e2r[6][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[6][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        ur[l] = L->e2r[8][l];
+        ui[l] = L->e2i[8][l];
+        L->e2r[8][l] = ur[l] * L->e2r[0][l] - ui[l] * L->e2i[0][l];
+        L->e2i[8][l] = ur[l] * L->e2i[0][l] + ui[l] * L->e2r[0][l];
+        p[l] = 1;
+        best[l] = fabs(L->e2r[1 * VSCMG3_NX + 1][l]) + fabs(L->e2i[1 * VSCMG3_NX + 1][l]);
+    }
+    for (i = 2; i < 3; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            p[l] = fabs(L->e2r[i * VSCMG3_NX + 1][l]) + fabs(L->e2i[i * VSCMG3_NX + 1][l]) >
+                    best[l] ? i : p[l];
+            best[l] = fabs(L->e2r[i * VSCMG3_NX + 1][l]) + fabs(L->e2i[i * VSCMG3_NX + 1][l]) >
+                    best[l] ? fabs(L->e2r[i * VSCMG3_NX + 1][l]) + fabs(L->e2i[i * VSCMG3_NX +
+                    1][l]) : best[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->piv2[1][l] = p[l];
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+    }
+    for (q = 2; q < 3; ++q) {
+        for (j = 1; j < VSCMG3_NX; ++j) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                double held;
+                held = L->e2r[1 * VSCMG3_NX + j][l];
+                L->e2r[1 * VSCMG3_NX + j][l] = p[l] == q ? L->e2r[q * VSCMG3_NX + j][l] :
+                        L->e2r[1 * VSCMG3_NX + j][l];
+                L->e2r[q * VSCMG3_NX + j][l] = p[l] == q ? held : L->e2r[q * VSCMG3_NX + j][l];
+                held = L->e2i[1 * VSCMG3_NX + j][l];
+                L->e2i[1 * VSCMG3_NX + j][l] = p[l] == q ? L->e2i[q * VSCMG3_NX + j][l] :
+                        L->e2i[1 * VSCMG3_NX + j][l];
+                L->e2i[q * VSCMG3_NX + j][l] = p[l] == q ? held : L->e2i[q * VSCMG3_NX + j][l];
+            }
+        }
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        re[l] = L->e2r[16][l];
+        im[l] = L->e2i[16][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[16][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[16][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+    }
+    for (i = 2; i < 3; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            lr[l] = L->e2r[i * VSCMG3_NX + 1][l] * L->e2r[16][l] - L->e2i[i * VSCMG3_NX + 1][l] *
+                    L->e2i[16][l];
+            li[l] = L->e2r[i * VSCMG3_NX + 1][l] * L->e2i[16][l] + L->e2i[i * VSCMG3_NX + 1][l] *
+                    L->e2r[16][l];
+            L->e2r[i * VSCMG3_NX + 1][l] = lr[l];
+            L->e2i[i * VSCMG3_NX + 1][l] = li[l];
+            ur[l] = L->e2r[17][l];
+            ui[l] = L->e2i[17][l];
+            L->e2r[i * VSCMG3_NX + 2][l] = L->e2r[i * VSCMG3_NX + 2][l] - (lr[l] * ur[l] - li[l]
+                    * ui[l]);
+            L->e2i[i * VSCMG3_NX + 2][l] = L->e2i[i * VSCMG3_NX + 2][l] - (lr[l] * ui[l] + li[l]
+                    * ur[l]);
+            ur[l] = L->e2r[21][l];
+            ui[l] = L->e2i[21][l];
+            L->e2r[i * VSCMG3_NX + 6][l] = L->e2r[i * VSCMG3_NX + 6][l] - (lr[l] * ur[l] - li[l]
+                    * ui[l]);
+            L->e2i[i * VSCMG3_NX + 6][l] = L->e2i[i * VSCMG3_NX + 6][l] - (lr[l] * ui[l] + li[l]
+                    * ur[l]);
+            ur[l] = L->e2r[22][l];
+            ui[l] = L->e2i[22][l];
+            L->e2r[i * VSCMG3_NX + 7][l] = L->e2r[i * VSCMG3_NX + 7][l] - (lr[l] * ur[l] - li[l]
+                    * ui[l]);
+            L->e2i[i * VSCMG3_NX + 7][l] = L->e2i[i * VSCMG3_NX + 7][l] - (lr[l] * ui[l] + li[l]
+                    * ur[l]);
+            ur[l] = L->e2r[23][l];
+            ui[l] = L->e2i[23][l];
+            L->e2r[i * VSCMG3_NX + 8][l] = L->e2r[i * VSCMG3_NX + 8][l] - (lr[l] * ur[l] - li[l]
+                    * ui[l]);
+            L->e2i[i * VSCMG3_NX + 8][l] = L->e2i[i * VSCMG3_NX + 8][l] - (lr[l] * ui[l] + li[l]
+                    * ur[l]);
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        ur[l] = L->e2r[17][l];
+        ui[l] = L->e2i[17][l];
+        L->e2r[17][l] = ur[l] * L->e2r[16][l] - ui[l] * L->e2i[16][l];
+        L->e2i[17][l] = ur[l] * L->e2i[16][l] + ui[l] * L->e2r[16][l];
+        ur[l] = L->e2r[21][l];
+        ui[l] = L->e2i[21][l];
+        L->e2r[21][l] = ur[l] * L->e2r[16][l] - ui[l] * L->e2i[16][l];
+        L->e2i[21][l] = ur[l] * L->e2i[16][l] + ui[l] * L->e2r[16][l];
+        ur[l] = L->e2r[22][l];
+        ui[l] = L->e2i[22][l];
+        L->e2r[22][l] = ur[l] * L->e2r[16][l] - ui[l] * L->e2i[16][l];
+        L->e2i[22][l] = ur[l] * L->e2i[16][l] + ui[l] * L->e2r[16][l];
+        ur[l] = L->e2r[23][l];
+        ui[l] = L->e2i[23][l];
+        L->e2r[23][l] = ur[l] * L->e2r[16][l] - ui[l] * L->e2i[16][l];
+        L->e2i[23][l] = ur[l] * L->e2i[16][l] + ui[l] * L->e2r[16][l];
+        L->piv2[2][l] = 2;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[32][l]) + fabs(L->e2i[32][l]) > 0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        re[l] = L->e2r[32][l];
+        im[l] = L->e2i[32][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[32][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[32][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        ur[l] = L->e2r[36][l];
+        ui[l] = L->e2i[36][l];
+        L->e2r[36][l] = ur[l] * L->e2r[32][l] - ui[l] * L->e2i[32][l];
+        L->e2i[36][l] = ur[l] * L->e2i[32][l] + ui[l] * L->e2r[32][l];
+        ur[l] = L->e2r[37][l];
+        ui[l] = L->e2i[37][l];
+        L->e2r[37][l] = ur[l] * L->e2r[32][l] - ui[l] * L->e2i[32][l];
+        L->e2i[37][l] = ur[l] * L->e2i[32][l] + ui[l] * L->e2r[32][l];
+        ur[l] = L->e2r[38][l];
+        ui[l] = L->e2i[38][l];
+        L->e2r[38][l] = ur[l] * L->e2r[32][l] - ui[l] * L->e2i[32][l];
+        L->e2i[38][l] = ur[l] * L->e2i[32][l] + ui[l] * L->e2r[32][l];
+    }
+    for (col = 3; col < 11; ++col) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            p[l] = col;
+            best[l] = fabs(L->e2r[col * VSCMG3_NX + col][l]) + fabs(L->e2i[col * VSCMG3_NX +
+                    col][l]);
+        }
+        for (i = col + 1; i < 12; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                p[l] = fabs(L->e2r[i * VSCMG3_NX + col][l]) + fabs(L->e2i[i * VSCMG3_NX +
+                        col][l]) > best[l] ? i : p[l];
+                best[l] = fabs(L->e2r[i * VSCMG3_NX + col][l]) + fabs(L->e2i[i * VSCMG3_NX +
+                        col][l]) > best[l] ? fabs(L->e2r[i * VSCMG3_NX + col][l]) + fabs(L->e2i[i
+                        * VSCMG3_NX + col][l]) : best[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->piv2[col][l] = p[l];
+            L->zero_pivot[l] = (L->zero_pivot[l] | !(best[l] > 0.0));
+        }
+        for (q = col + 1; q < 12; ++q) {
+            for (j = 3; j < VSCMG3_NX; ++j) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double held;
+                    held = L->e2r[col * VSCMG3_NX + j][l];
+                    L->e2r[col * VSCMG3_NX + j][l] = p[l] == q ? L->e2r[q * VSCMG3_NX + j][l] :
+                            L->e2r[col * VSCMG3_NX + j][l];
+                    L->e2r[q * VSCMG3_NX + j][l] = p[l] == q ? held : L->e2r[q * VSCMG3_NX + j][l];
+                    held = L->e2i[col * VSCMG3_NX + j][l];
+                    L->e2i[col * VSCMG3_NX + j][l] = p[l] == q ? L->e2i[q * VSCMG3_NX + j][l] :
+                            L->e2i[col * VSCMG3_NX + j][l];
+                    L->e2i[q * VSCMG3_NX + j][l] = p[l] == q ? held : L->e2i[q * VSCMG3_NX + j][l];
+                }
+            }
+        }
+        /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            re[l] = L->e2r[col * VSCMG3_NX + col][l];
+            im[l] = L->e2i[col * VSCMG3_NX + col][l];
+            r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+            d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+            L->e2r[col * VSCMG3_NX + col][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] /
+                    d[l];
+            L->e2i[col * VSCMG3_NX + col][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 /
+                    d[l];
+        }
+        for (i = col + 1; i < 12; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                lr[l] = L->e2r[i * VSCMG3_NX + col][l] * L->e2r[col * VSCMG3_NX + col][l] -
+                        L->e2i[i * VSCMG3_NX + col][l] * L->e2i[col * VSCMG3_NX + col][l];
+                li[l] = L->e2r[i * VSCMG3_NX + col][l] * L->e2i[col * VSCMG3_NX + col][l] +
+                        L->e2i[i * VSCMG3_NX + col][l] * L->e2r[col * VSCMG3_NX + col][l];
+                L->e2r[i * VSCMG3_NX + col][l] = lr[l];
+                L->e2i[i * VSCMG3_NX + col][l] = li[l];
+            }
+            for (j = col + 1; j < 12; ++j) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    ur[l] = L->e2r[col * VSCMG3_NX + j][l];
+                    ui[l] = L->e2i[col * VSCMG3_NX + j][l];
+                    L->e2r[i * VSCMG3_NX + j][l] = L->e2r[i * VSCMG3_NX + j][l] - (lr[l] * ur[l]
+                            - li[l] * ui[l]);
+                    L->e2i[i * VSCMG3_NX + j][l] = L->e2i[i * VSCMG3_NX + j][l] - (lr[l] * ui[l]
+                            + li[l] * ur[l]);
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                ur[l] = L->e2r[col * VSCMG3_NX + 12][l];
+                ui[l] = L->e2i[col * VSCMG3_NX + 12][l];
+                L->e2r[i * VSCMG3_NX + 12][l] = L->e2r[i * VSCMG3_NX + 12][l] - (lr[l] * ur[l] -
+                        li[l] * ui[l]);
+                L->e2i[i * VSCMG3_NX + 12][l] = L->e2i[i * VSCMG3_NX + 12][l] - (lr[l] * ui[l] +
+                        li[l] * ur[l]);
+                ur[l] = L->e2r[col * VSCMG3_NX + 13][l];
+                ui[l] = L->e2i[col * VSCMG3_NX + 13][l];
+                L->e2r[i * VSCMG3_NX + 13][l] = L->e2r[i * VSCMG3_NX + 13][l] - (lr[l] * ur[l] -
+                        li[l] * ui[l]);
+                L->e2i[i * VSCMG3_NX + 13][l] = L->e2i[i * VSCMG3_NX + 13][l] - (lr[l] * ui[l] +
+                        li[l] * ur[l]);
+                ur[l] = L->e2r[col * VSCMG3_NX + 14][l];
+                ui[l] = L->e2i[col * VSCMG3_NX + 14][l];
+                L->e2r[i * VSCMG3_NX + 14][l] = L->e2r[i * VSCMG3_NX + 14][l] - (lr[l] * ur[l] -
+                        li[l] * ui[l]);
+                L->e2i[i * VSCMG3_NX + 14][l] = L->e2i[i * VSCMG3_NX + 14][l] - (lr[l] * ui[l] +
+                        li[l] * ur[l]);
+            }
+        }
+        for (j = col + 1; j < 12; ++j) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                ur[l] = L->e2r[col * VSCMG3_NX + j][l];
+                ui[l] = L->e2i[col * VSCMG3_NX + j][l];
+                L->e2r[col * VSCMG3_NX + j][l] = ur[l] * L->e2r[col * VSCMG3_NX + col][l] - ui[l]
+                        * L->e2i[col * VSCMG3_NX + col][l];
+                L->e2i[col * VSCMG3_NX + j][l] = ur[l] * L->e2i[col * VSCMG3_NX + col][l] + ui[l]
+                        * L->e2r[col * VSCMG3_NX + col][l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            ur[l] = L->e2r[col * VSCMG3_NX + 12][l];
+            ui[l] = L->e2i[col * VSCMG3_NX + 12][l];
+            L->e2r[col * VSCMG3_NX + 12][l] = ur[l] * L->e2r[col * VSCMG3_NX + col][l] - ui[l] *
+                    L->e2i[col * VSCMG3_NX + col][l];
+            L->e2i[col * VSCMG3_NX + 12][l] = ur[l] * L->e2i[col * VSCMG3_NX + col][l] + ui[l] *
+                    L->e2r[col * VSCMG3_NX + col][l];
+            ur[l] = L->e2r[col * VSCMG3_NX + 13][l];
+            ui[l] = L->e2i[col * VSCMG3_NX + 13][l];
+            L->e2r[col * VSCMG3_NX + 13][l] = ur[l] * L->e2r[col * VSCMG3_NX + col][l] - ui[l] *
+                    L->e2i[col * VSCMG3_NX + col][l];
+            L->e2i[col * VSCMG3_NX + 13][l] = ur[l] * L->e2i[col * VSCMG3_NX + col][l] + ui[l] *
+                    L->e2r[col * VSCMG3_NX + col][l];
+            ur[l] = L->e2r[col * VSCMG3_NX + 14][l];
+            ui[l] = L->e2i[col * VSCMG3_NX + 14][l];
+            L->e2r[col * VSCMG3_NX + 14][l] = ur[l] * L->e2r[col * VSCMG3_NX + col][l] - ui[l] *
+                    L->e2i[col * VSCMG3_NX + col][l];
+            L->e2i[col * VSCMG3_NX + 14][l] = ur[l] * L->e2i[col * VSCMG3_NX + col][l] + ui[l] *
+                    L->e2r[col * VSCMG3_NX + col][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->piv2[11][l] = 11;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[176][l]) + fabs(L->e2i[176][l]) >
+                0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        re[l] = L->e2r[176][l];
+        im[l] = L->e2i[176][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[176][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[176][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        ur[l] = L->e2r[177][l];
+        ui[l] = L->e2i[177][l];
+        L->e2r[177][l] = ur[l] * L->e2r[176][l] - ui[l] * L->e2i[176][l];
+        L->e2i[177][l] = ur[l] * L->e2i[176][l] + ui[l] * L->e2r[176][l];
+        ur[l] = L->e2r[178][l];
+        ui[l] = L->e2i[178][l];
+        L->e2r[178][l] = ur[l] * L->e2r[176][l] - ui[l] * L->e2i[176][l];
+        L->e2i[178][l] = ur[l] * L->e2i[176][l] + ui[l] * L->e2r[176][l];
+        ur[l] = L->e2r[179][l];
+        ui[l] = L->e2i[179][l];
+        L->e2r[179][l] = ur[l] * L->e2r[176][l] - ui[l] * L->e2i[176][l];
+        L->e2i[179][l] = ur[l] * L->e2i[176][l] + ui[l] * L->e2r[176][l];
+        L->piv2[12][l] = 12;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[192][l]) + fabs(L->e2i[192][l]) >
+                0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        re[l] = L->e2r[192][l];
+        im[l] = L->e2i[192][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[192][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[192][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        L->piv2[13][l] = 13;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[208][l]) + fabs(L->e2i[208][l]) >
+                0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        re[l] = L->e2r[208][l];
+        im[l] = L->e2i[208][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[208][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[208][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+        L->piv2[14][l] = 14;
+        L->zero_pivot[l] = (L->zero_pivot[l] | !(fabs(L->e2r[224][l]) + fabs(L->e2i[224][l]) >
+                0.0));
+    }
+    /* 1/u_kk by Smith's division (no overflow in re^2 + im^2) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        re[l] = L->e2r[224][l];
+        im[l] = L->e2i[224][l];
+        r[l] = fabs(re[l]) >= fabs(im[l]) ? im[l] / re[l] : re[l] / im[l];
+        d[l] = fabs(re[l]) >= fabs(im[l]) ? re[l] + im[l] * r[l] : im[l] + re[l] * r[l];
+        L->e2r[224][l] = fabs(re[l]) >= fabs(im[l]) ? 1.0 / d[l] : r[l] / d[l];
+        L->e2i[224][l] = fabs(re[l]) >= fabs(im[l]) ? -r[l] / d[l] : -1.0 / d[l];
+    }
+}
+
+/* lu_solve_complex on every lane's z2 + i z3, its rows exchanged by selection. */
+static void lu_solve_complex_lanes(struct lanes *L)
+{
+    int l, q, r;
+    for (r = 1; r < 2; ++r) {
+        for (q = r + 1; q < 3; ++q) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                double swap;
+                swap = L->z2[r][l];
+                L->z2[r][l] = L->piv2[r][l] == q ? L->z2[q][l] : L->z2[r][l];
+                L->z2[q][l] = L->piv2[r][l] == q ? swap : L->z2[q][l];
+                swap = L->z3[r][l];
+                L->z3[r][l] = L->piv2[r][l] == q ? L->z3[q][l] : L->z3[r][l];
+                L->z3[q][l] = L->piv2[r][l] == q ? swap : L->z3[q][l];
+            }
+        }
+    }
+    for (r = 3; r < 11; ++r) {
+        for (q = r + 1; q < 12; ++q) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                double swap;
+                swap = L->z2[r][l];
+                L->z2[r][l] = L->piv2[r][l] == q ? L->z2[q][l] : L->z2[r][l];
+                L->z2[q][l] = L->piv2[r][l] == q ? swap : L->z2[q][l];
+                swap = L->z3[r][l];
+                L->z3[r][l] = L->piv2[r][l] == q ? L->z3[q][l] : L->z3[r][l];
+                L->z3[q][l] = L->piv2[r][l] == q ? swap : L->z3[q][l];
+            }
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        double br0, bi0, br1, bi1, br2, bi2, br3, bi3, br4, bi4, br5, bi5, br6, bi6, br7, bi7, br8, bi8, br9, bi9, br10, bi10, br11, bi11, br12, bi12, br13, bi13, br14, bi14, re;
+        br0 = L->z2[0][l];
+        bi0 = L->z3[0][l];
+        br1 = L->z2[1][l];
+        bi1 = L->z3[1][l];
+        br2 = L->z2[2][l];
+        bi2 = L->z3[2][l];
+        br3 = L->z2[3][l];
+        bi3 = L->z3[3][l];
+        br4 = L->z2[4][l];
+        bi4 = L->z3[4][l];
+        br5 = L->z2[5][l];
+        bi5 = L->z3[5][l];
+        br6 = L->z2[6][l];
+        bi6 = L->z3[6][l];
+        br7 = L->z2[7][l];
+        bi7 = L->z3[7][l];
+        br8 = L->z2[8][l];
+        bi8 = L->z3[8][l];
+        br9 = L->z2[9][l];
+        bi9 = L->z3[9][l];
+        br10 = L->z2[10][l];
+        bi10 = L->z3[10][l];
+        br11 = L->z2[11][l];
+        bi11 = L->z3[11][l];
+        br12 = L->z2[12][l];
+        bi12 = L->z3[12][l];
+        br13 = L->z2[13][l];
+        bi13 = L->z3[13][l];
+        br14 = L->z2[14][l];
+        bi14 = L->z3[14][l];
+        br2 = br2 - L->e2r[31][l] * br1 + L->e2i[31][l] * bi1;
+        bi2 = bi2 - L->e2r[31][l] * bi1 - L->e2i[31][l] * br1;
+        br4 = br4 - L->e2r[63][l] * br3 + L->e2i[63][l] * bi3;
+        bi4 = bi4 - L->e2r[63][l] * bi3 - L->e2i[63][l] * br3;
+        br5 = br5 - L->e2r[78][l] * br3 + L->e2i[78][l] * bi3 - L->e2r[79][l] * br4 +
+                L->e2i[79][l] * bi4;
+        bi5 = bi5 - L->e2r[78][l] * bi3 - L->e2i[78][l] * br3 - L->e2r[79][l] * bi4 -
+                L->e2i[79][l] * br4;
+        br6 = br6 - L->e2r[93][l] * br3 + L->e2i[93][l] * bi3 - L->e2r[94][l] * br4 +
+                L->e2i[94][l] * bi4 - L->e2r[95][l] * br5 + L->e2i[95][l] * bi5;
+        bi6 = bi6 - L->e2r[93][l] * bi3 - L->e2i[93][l] * br3 - L->e2r[94][l] * bi4 -
+                L->e2i[94][l] * br4 - L->e2r[95][l] * bi5 - L->e2i[95][l] * br5;
+        br7 = br7 - L->e2r[108][l] * br3 + L->e2i[108][l] * bi3 - L->e2r[109][l] * br4 +
+                L->e2i[109][l] * bi4 - L->e2r[110][l] * br5 + L->e2i[110][l] * bi5 -
+                L->e2r[111][l] * br6 + L->e2i[111][l] * bi6;
+        bi7 = bi7 - L->e2r[108][l] * bi3 - L->e2i[108][l] * br3 - L->e2r[109][l] * bi4 -
+                L->e2i[109][l] * br4 - L->e2r[110][l] * bi5 - L->e2i[110][l] * br5 -
+                L->e2r[111][l] * bi6 - L->e2i[111][l] * br6;
+        br8 = br8 - L->e2r[123][l] * br3 + L->e2i[123][l] * bi3 - L->e2r[124][l] * br4 +
+                L->e2i[124][l] * bi4 - L->e2r[125][l] * br5 + L->e2i[125][l] * bi5 -
+                L->e2r[126][l] * br6 + L->e2i[126][l] * bi6 - L->e2r[127][l] * br7 +
+                L->e2i[127][l] * bi7;
+        bi8 = bi8 - L->e2r[123][l] * bi3 - L->e2i[123][l] * br3 - L->e2r[124][l] * bi4 -
+                L->e2i[124][l] * br4 - L->e2r[125][l] * bi5 - L->e2i[125][l] * br5 -
+                L->e2r[126][l] * bi6 - L->e2i[126][l] * br6 - L->e2r[127][l] * bi7 -
+                L->e2i[127][l] * br7;
+        br9 = br9 - L->e2r[138][l] * br3 + L->e2i[138][l] * bi3 - L->e2r[139][l] * br4 +
+                L->e2i[139][l] * bi4 - L->e2r[140][l] * br5 + L->e2i[140][l] * bi5 -
+                L->e2r[141][l] * br6 + L->e2i[141][l] * bi6 - L->e2r[142][l] * br7 +
+                L->e2i[142][l] * bi7 - L->e2r[143][l] * br8 + L->e2i[143][l] * bi8;
+        bi9 = bi9 - L->e2r[138][l] * bi3 - L->e2i[138][l] * br3 - L->e2r[139][l] * bi4 -
+                L->e2i[139][l] * br4 - L->e2r[140][l] * bi5 - L->e2i[140][l] * br5 -
+                L->e2r[141][l] * bi6 - L->e2i[141][l] * br6 - L->e2r[142][l] * bi7 -
+                L->e2i[142][l] * br7 - L->e2r[143][l] * bi8 - L->e2i[143][l] * br8;
+        br10 = br10 - L->e2r[153][l] * br3 + L->e2i[153][l] * bi3 - L->e2r[154][l] * br4 +
+                L->e2i[154][l] * bi4 - L->e2r[155][l] * br5 + L->e2i[155][l] * bi5 -
+                L->e2r[156][l] * br6 + L->e2i[156][l] * bi6 - L->e2r[157][l] * br7 +
+                L->e2i[157][l] * bi7 - L->e2r[158][l] * br8 + L->e2i[158][l] * bi8 -
+                L->e2r[159][l] * br9 + L->e2i[159][l] * bi9;
+        bi10 = bi10 - L->e2r[153][l] * bi3 - L->e2i[153][l] * br3 - L->e2r[154][l] * bi4 -
+                L->e2i[154][l] * br4 - L->e2r[155][l] * bi5 - L->e2i[155][l] * br5 -
+                L->e2r[156][l] * bi6 - L->e2i[156][l] * br6 - L->e2r[157][l] * bi7 -
+                L->e2i[157][l] * br7 - L->e2r[158][l] * bi8 - L->e2i[158][l] * br8 -
+                L->e2r[159][l] * bi9 - L->e2i[159][l] * br9;
+        br11 = br11 - L->e2r[168][l] * br3 + L->e2i[168][l] * bi3 - L->e2r[169][l] * br4 +
+                L->e2i[169][l] * bi4 - L->e2r[170][l] * br5 + L->e2i[170][l] * bi5 -
+                L->e2r[171][l] * br6 + L->e2i[171][l] * bi6 - L->e2r[172][l] * br7 +
+                L->e2i[172][l] * bi7 - L->e2r[173][l] * br8 + L->e2i[173][l] * bi8 -
+                L->e2r[174][l] * br9 + L->e2i[174][l] * bi9 - L->e2r[175][l] * br10 +
+                L->e2i[175][l] * bi10;
+        bi11 = bi11 - L->e2r[168][l] * bi3 - L->e2i[168][l] * br3 - L->e2r[169][l] * bi4 -
+                L->e2i[169][l] * br4 - L->e2r[170][l] * bi5 - L->e2i[170][l] * br5 -
+                L->e2r[171][l] * bi6 - L->e2i[171][l] * br6 - L->e2r[172][l] * bi7 -
+                L->e2i[172][l] * br7 - L->e2r[173][l] * bi8 - L->e2i[173][l] * br8 -
+                L->e2r[174][l] * bi9 - L->e2i[174][l] * br9 - L->e2r[175][l] * bi10 -
+                L->e2i[175][l] * br10;
+        re = br14 * L->e2r[224][l] - bi14 * L->e2i[224][l];
+        bi14 = bi14 * L->e2r[224][l] + br14 * L->e2i[224][l];
+        br14 = re;
+        re = br13 * L->e2r[208][l] - bi13 * L->e2i[208][l];
+        bi13 = bi13 * L->e2r[208][l] + br13 * L->e2i[208][l];
+        br13 = re;
+        re = br12 * L->e2r[192][l] - bi12 * L->e2i[192][l];
+        bi12 = bi12 * L->e2r[192][l] + br12 * L->e2i[192][l];
+        br12 = re;
+        re = br11 * L->e2r[176][l] - bi11 * L->e2i[176][l] - L->e2r[179][l] * br14 +
+                L->e2i[179][l] * bi14 - L->e2r[178][l] * br13 + L->e2i[178][l] * bi13 -
+                L->e2r[177][l] * br12 + L->e2i[177][l] * bi12;
+        bi11 = bi11 * L->e2r[176][l] + br11 * L->e2i[176][l] - L->e2r[179][l] * bi14 -
+                L->e2i[179][l] * br14 - L->e2r[178][l] * bi13 - L->e2i[178][l] * br13 -
+                L->e2r[177][l] * bi12 - L->e2i[177][l] * br12;
+        br11 = re;
+        re = br10 * L->e2r[160][l] - bi10 * L->e2i[160][l] - L->e2r[164][l] * br14 +
+                L->e2i[164][l] * bi14 - L->e2r[163][l] * br13 + L->e2i[163][l] * bi13 -
+                L->e2r[162][l] * br12 + L->e2i[162][l] * bi12 - L->e2r[161][l] * br11 +
+                L->e2i[161][l] * bi11;
+        bi10 = bi10 * L->e2r[160][l] + br10 * L->e2i[160][l] - L->e2r[164][l] * bi14 -
+                L->e2i[164][l] * br14 - L->e2r[163][l] * bi13 - L->e2i[163][l] * br13 -
+                L->e2r[162][l] * bi12 - L->e2i[162][l] * br12 - L->e2r[161][l] * bi11 -
+                L->e2i[161][l] * br11;
+        br10 = re;
+        re = br9 * L->e2r[144][l] - bi9 * L->e2i[144][l] - L->e2r[149][l] * br14 + L->e2i[149][l]
+                * bi14 - L->e2r[148][l] * br13 + L->e2i[148][l] * bi13 - L->e2r[147][l] * br12 +
+                L->e2i[147][l] * bi12 - L->e2r[146][l] * br11 + L->e2i[146][l] * bi11 -
+                L->e2r[145][l] * br10 + L->e2i[145][l] * bi10;
+        bi9 = bi9 * L->e2r[144][l] + br9 * L->e2i[144][l] - L->e2r[149][l] * bi14 -
+                L->e2i[149][l] * br14 - L->e2r[148][l] * bi13 - L->e2i[148][l] * br13 -
+                L->e2r[147][l] * bi12 - L->e2i[147][l] * br12 - L->e2r[146][l] * bi11 -
+                L->e2i[146][l] * br11 - L->e2r[145][l] * bi10 - L->e2i[145][l] * br10;
+        br9 = re;
+        re = br8 * L->e2r[128][l] - bi8 * L->e2i[128][l] - L->e2r[134][l] * br14 + L->e2i[134][l]
+                * bi14 - L->e2r[133][l] * br13 + L->e2i[133][l] * bi13 - L->e2r[132][l] * br12 +
+                L->e2i[132][l] * bi12 - L->e2r[131][l] * br11 + L->e2i[131][l] * bi11 -
+                L->e2r[130][l] * br10 + L->e2i[130][l] * bi10 - L->e2r[129][l] * br9 +
+                L->e2i[129][l] * bi9;
+        bi8 = bi8 * L->e2r[128][l] + br8 * L->e2i[128][l] - L->e2r[134][l] * bi14 -
+                L->e2i[134][l] * br14 - L->e2r[133][l] * bi13 - L->e2i[133][l] * br13 -
+                L->e2r[132][l] * bi12 - L->e2i[132][l] * br12 - L->e2r[131][l] * bi11 -
+                L->e2i[131][l] * br11 - L->e2r[130][l] * bi10 - L->e2i[130][l] * br10 -
+                L->e2r[129][l] * bi9 - L->e2i[129][l] * br9;
+        br8 = re;
+        re = br7 * L->e2r[112][l] - bi7 * L->e2i[112][l] - L->e2r[119][l] * br14 + L->e2i[119][l]
+                * bi14 - L->e2r[118][l] * br13 + L->e2i[118][l] * bi13 - L->e2r[117][l] * br12 +
+                L->e2i[117][l] * bi12 - L->e2r[116][l] * br11 + L->e2i[116][l] * bi11 -
+                L->e2r[115][l] * br10 + L->e2i[115][l] * bi10 - L->e2r[114][l] * br9 +
+                L->e2i[114][l] * bi9 - L->e2r[113][l] * br8 + L->e2i[113][l] * bi8;
+        bi7 = bi7 * L->e2r[112][l] + br7 * L->e2i[112][l] - L->e2r[119][l] * bi14 -
+                L->e2i[119][l] * br14 - L->e2r[118][l] * bi13 - L->e2i[118][l] * br13 -
+                L->e2r[117][l] * bi12 - L->e2i[117][l] * br12 - L->e2r[116][l] * bi11 -
+                L->e2i[116][l] * br11 - L->e2r[115][l] * bi10 - L->e2i[115][l] * br10 -
+                L->e2r[114][l] * bi9 - L->e2i[114][l] * br9 - L->e2r[113][l] * bi8 -
+                L->e2i[113][l] * br8;
+        br7 = re;
+        re = br6 * L->e2r[96][l] - bi6 * L->e2i[96][l] - L->e2r[104][l] * br14 + L->e2i[104][l] *
+                bi14 - L->e2r[103][l] * br13 + L->e2i[103][l] * bi13 - L->e2r[102][l] * br12 +
+                L->e2i[102][l] * bi12 - L->e2r[101][l] * br11 + L->e2i[101][l] * bi11 -
+                L->e2r[100][l] * br10 + L->e2i[100][l] * bi10 - L->e2r[99][l] * br9 +
+                L->e2i[99][l] * bi9 - L->e2r[98][l] * br8 + L->e2i[98][l] * bi8 - L->e2r[97][l] *
+                br7 + L->e2i[97][l] * bi7;
+        bi6 = bi6 * L->e2r[96][l] + br6 * L->e2i[96][l] - L->e2r[104][l] * bi14 - L->e2i[104][l]
+                * br14 - L->e2r[103][l] * bi13 - L->e2i[103][l] * br13 - L->e2r[102][l] * bi12 -
+                L->e2i[102][l] * br12 - L->e2r[101][l] * bi11 - L->e2i[101][l] * br11 -
+                L->e2r[100][l] * bi10 - L->e2i[100][l] * br10 - L->e2r[99][l] * bi9 -
+                L->e2i[99][l] * br9 - L->e2r[98][l] * bi8 - L->e2i[98][l] * br8 - L->e2r[97][l] *
+                bi7 - L->e2i[97][l] * br7;
+        br6 = re;
+        re = br5 * L->e2r[80][l] - bi5 * L->e2i[80][l] - L->e2r[89][l] * br14 + L->e2i[89][l] *
+                bi14 - L->e2r[88][l] * br13 + L->e2i[88][l] * bi13 - L->e2r[87][l] * br12 +
+                L->e2i[87][l] * bi12 - L->e2r[86][l] * br11 + L->e2i[86][l] * bi11 -
+                L->e2r[85][l] * br10 + L->e2i[85][l] * bi10 - L->e2r[84][l] * br9 + L->e2i[84][l]
+                * bi9 - L->e2r[83][l] * br8 + L->e2i[83][l] * bi8 - L->e2r[82][l] * br7 +
+                L->e2i[82][l] * bi7 - L->e2r[81][l] * br6 + L->e2i[81][l] * bi6;
+        bi5 = bi5 * L->e2r[80][l] + br5 * L->e2i[80][l] - L->e2r[89][l] * bi14 - L->e2i[89][l] *
+                br14 - L->e2r[88][l] * bi13 - L->e2i[88][l] * br13 - L->e2r[87][l] * bi12 -
+                L->e2i[87][l] * br12 - L->e2r[86][l] * bi11 - L->e2i[86][l] * br11 -
+                L->e2r[85][l] * bi10 - L->e2i[85][l] * br10 - L->e2r[84][l] * bi9 - L->e2i[84][l]
+                * br9 - L->e2r[83][l] * bi8 - L->e2i[83][l] * br8 - L->e2r[82][l] * bi7 -
+                L->e2i[82][l] * br7 - L->e2r[81][l] * bi6 - L->e2i[81][l] * br6;
+        br5 = re;
+        re = br4 * L->e2r[64][l] - bi4 * L->e2i[64][l] - L->e2r[74][l] * br14 + L->e2i[74][l] *
+                bi14 - L->e2r[73][l] * br13 + L->e2i[73][l] * bi13 - L->e2r[72][l] * br12 +
+                L->e2i[72][l] * bi12 - L->e2r[71][l] * br11 + L->e2i[71][l] * bi11 -
+                L->e2r[70][l] * br10 + L->e2i[70][l] * bi10 - L->e2r[69][l] * br9 + L->e2i[69][l]
+                * bi9 - L->e2r[68][l] * br8 + L->e2i[68][l] * bi8 - L->e2r[67][l] * br7 +
+                L->e2i[67][l] * bi7 - L->e2r[66][l] * br6 + L->e2i[66][l] * bi6 - L->e2r[65][l] *
+                br5 + L->e2i[65][l] * bi5;
+        bi4 = bi4 * L->e2r[64][l] + br4 * L->e2i[64][l] - L->e2r[74][l] * bi14 - L->e2i[74][l] *
+                br14 - L->e2r[73][l] * bi13 - L->e2i[73][l] * br13 - L->e2r[72][l] * bi12 -
+                L->e2i[72][l] * br12 - L->e2r[71][l] * bi11 - L->e2i[71][l] * br11 -
+                L->e2r[70][l] * bi10 - L->e2i[70][l] * br10 - L->e2r[69][l] * bi9 - L->e2i[69][l]
+                * br9 - L->e2r[68][l] * bi8 - L->e2i[68][l] * br8 - L->e2r[67][l] * bi7 -
+                L->e2i[67][l] * br7 - L->e2r[66][l] * bi6 - L->e2i[66][l] * br6 - L->e2r[65][l] *
+                bi5 - L->e2i[65][l] * br5;
+        br4 = re;
+        re = br3 * L->e2r[48][l] - bi3 * L->e2i[48][l] - L->e2r[59][l] * br14 + L->e2i[59][l] *
+                bi14 - L->e2r[58][l] * br13 + L->e2i[58][l] * bi13 - L->e2r[57][l] * br12 +
+                L->e2i[57][l] * bi12 - L->e2r[56][l] * br11 + L->e2i[56][l] * bi11 -
+                L->e2r[55][l] * br10 + L->e2i[55][l] * bi10 - L->e2r[54][l] * br9 + L->e2i[54][l]
+                * bi9 - L->e2r[53][l] * br8 + L->e2i[53][l] * bi8 - L->e2r[52][l] * br7 +
+                L->e2i[52][l] * bi7 - L->e2r[51][l] * br6 + L->e2i[51][l] * bi6 - L->e2r[50][l] *
+                br5 + L->e2i[50][l] * bi5 - L->e2r[49][l] * br4 + L->e2i[49][l] * bi4;
+        bi3 = bi3 * L->e2r[48][l] + br3 * L->e2i[48][l] - L->e2r[59][l] * bi14 - L->e2i[59][l] *
+                br14 - L->e2r[58][l] * bi13 - L->e2i[58][l] * br13 - L->e2r[57][l] * bi12 -
+                L->e2i[57][l] * br12 - L->e2r[56][l] * bi11 - L->e2i[56][l] * br11 -
+                L->e2r[55][l] * bi10 - L->e2i[55][l] * br10 - L->e2r[54][l] * bi9 - L->e2i[54][l]
+                * br9 - L->e2r[53][l] * bi8 - L->e2i[53][l] * br8 - L->e2r[52][l] * bi7 -
+                L->e2i[52][l] * br7 - L->e2r[51][l] * bi6 - L->e2i[51][l] * br6 - L->e2r[50][l] *
+                bi5 - L->e2i[50][l] * br5 - L->e2r[49][l] * bi4 - L->e2i[49][l] * br4;
+        br3 = re;
+        re = br2 * L->e2r[32][l] - bi2 * L->e2i[32][l] - L->e2r[38][l] * br8 + L->e2i[38][l] *
+                bi8 - L->e2r[37][l] * br7 + L->e2i[37][l] * bi7 - L->e2r[36][l] * br6 +
+                L->e2i[36][l] * bi6;
+        bi2 = bi2 * L->e2r[32][l] + br2 * L->e2i[32][l] - L->e2r[38][l] * bi8 - L->e2i[38][l] *
+                br8 - L->e2r[37][l] * bi7 - L->e2i[37][l] * br7 - L->e2r[36][l] * bi6 -
+                L->e2i[36][l] * br6;
+        br2 = re;
+        re = br1 * L->e2r[16][l] - bi1 * L->e2i[16][l] - L->e2r[23][l] * br8 + L->e2i[23][l] *
+                bi8 - L->e2r[22][l] * br7 + L->e2i[22][l] * bi7 - L->e2r[21][l] * br6 +
+                L->e2i[21][l] * bi6 - L->e2r[17][l] * br2 + L->e2i[17][l] * bi2;
+        bi1 = bi1 * L->e2r[16][l] + br1 * L->e2i[16][l] - L->e2r[23][l] * bi8 - L->e2i[23][l] *
+                br8 - L->e2r[22][l] * bi7 - L->e2i[22][l] * br7 - L->e2r[21][l] * bi6 -
+                L->e2i[21][l] * br6 - L->e2r[17][l] * bi2 - L->e2i[17][l] * br2;
+        br1 = re;
+        re = br0 * L->e2r[0][l] - bi0 * L->e2i[0][l] - L->e2r[8][l] * br8 + L->e2i[8][l] * bi8 -
+                L->e2r[6][l] * br6 + L->e2i[6][l] * bi6 - L->e2r[2][l] * br2 + L->e2i[2][l] * bi2
+                - L->e2r[1][l] * br1 + L->e2i[1][l] * bi1;
+        bi0 = bi0 * L->e2r[0][l] + br0 * L->e2i[0][l] - L->e2r[8][l] * bi8 - L->e2i[8][l] * br8 -
+                L->e2r[6][l] * bi6 - L->e2i[6][l] * br6 - L->e2r[2][l] * bi2 - L->e2i[2][l] * br2
+                - L->e2r[1][l] * bi1 - L->e2i[1][l] * br1;
+        br0 = re;
+        L->z2[0][l] = br0;
+        L->z3[0][l] = bi0;
+        L->z2[1][l] = br1;
+        L->z3[1][l] = bi1;
+        L->z2[2][l] = br2;
+        L->z3[2][l] = bi2;
+        L->z2[3][l] = br3;
+        L->z3[3][l] = bi3;
+        L->z2[4][l] = br4;
+        L->z3[4][l] = bi4;
+        L->z2[5][l] = br5;
+        L->z3[5][l] = bi5;
+        L->z2[6][l] = br6;
+        L->z3[6][l] = bi6;
+        L->z2[7][l] = br7;
+        L->z3[7][l] = bi7;
+        L->z2[8][l] = br8;
+        L->z3[8][l] = bi8;
+        L->z2[9][l] = br9;
+        L->z3[9][l] = bi9;
+        L->z2[10][l] = br10;
+        L->z3[10][l] = bi10;
+        L->z2[11][l] = br11;
+        L->z3[11][l] = bi11;
+        L->z2[12][l] = br12;
+        L->z3[12][l] = bi12;
+        L->z2[13][l] = br13;
+        L->z3[13][l] = bi13;
+        L->z2[14][l] = br14;
+        L->z3[14][l] = bi14;
     }
 }
 
@@ -6699,6 +7383,1334 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of radau5_integrate's loop on every lane. */
+static void radau5_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                              double t1, long max_steps)
+{
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    int go[VSCMG3_LANES] = {0};
+    int fresh[VSCMG3_LANES] = {0};
+    int bad[VSCMG3_LANES] = {0};
+    int refac[VSCMG3_LANES] = {0};
+    int sing[VSCMG3_LANES] = {0};
+    int retry[VSCMG3_LANES] = {0};
+    int stop[VSCMG3_LANES] = {0};
+    int iter[VSCMG3_LANES] = {0};
+    int done[VSCMG3_LANES] = {0};
+    int cont[VSCMG3_LANES] = {0};
+    int fail[VSCMG3_LANES] = {0};
+    int ok0[VSCMG3_LANES] = {0};
+    int take[VSCMG3_LANES] = {0};
+    int rej[VSCMG3_LANES] = {0};
+    int lock[VSCMG3_LANES] = {0};
+    int ok[VSCMG3_LANES] = {0};
+    int fin[VSCMG3_LANES] = {0};
+    int keep[VSCMG3_LANES] = {0};
+    int again[VSCMG3_LANES] = {0};
+    int badf[VSCMG3_LANES] = {0};
+    int fresh0[VSCMG3_LANES] = {0};
+    double gamma_h[VSCMG3_LANES] = {0};
+    double alpha_h[VSCMG3_LANES] = {0};
+    double beta_h[VSCMG3_LANES] = {0};
+    double total[VSCMG3_LANES] = {0};
+    double norm[VSCMG3_LANES] = {0};
+    double dyno[VSCMG3_LANES] = {0};
+    double thq[VSCMG3_LANES] = {0};
+    double predicted[VSCMG3_LANES] = {0};
+    double q[VSCMG3_LANES] = {0};
+    double theta_k[VSCMG3_LANES] = {0};
+    double err[VSCMG3_LANES] = {0};
+    double quot[VSCMG3_LANES] = {0};
+    double h_new[VSCMG3_LANES] = {0};
+    double gus[VSCMG3_LANES] = {0};
+    double c1q[VSCMG3_LANES] = {0};
+    double c2q[VSCMG3_LANES] = {0};
+    double c3q[VSCMG3_LANES] = {0};
+    int newt[VSCMG3_LANES] = {0};
+    int outcome[VSCMG3_LANES] = {0};
+    static const int stored[126] = {0, 1, 2, 6, 8, 16, 17, 21, 22, 23, 31, 32, 36, 37, 38, 48,
+            49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 63, 64, 65, 66, 67, 68, 69, 70, 71, 72,
+            73, 74, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 93, 94, 95, 96, 97, 98, 99,
+            100, 101, 102, 103, 104, 108, 109, 110, 111, 112, 113, 114, 115, 116, 117, 118, 119,
+            123, 124, 125, 126, 127, 128, 129, 130, 131, 132, 133, 134, 138, 139, 140, 141, 142,
+            143, 144, 145, 146, 147, 148, 149, 153, 154, 155, 156, 157, 158, 159, 160, 161, 162,
+            163, 164, 168, 169, 170, 171, 172, 173, 174, 175, 176, 177, 178, 179, 192, 208, 224};
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
+    int e, i, j, l;
+    int need;
+    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
+    atol_e = rtol_e * (atol / rtol);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+
+    /* a lane's first turn: a last step from t0 (m.name_integrate's start) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        fresh0[l] = go[l] && !L->begun[l];
+        L->h[l] = fresh0[l] && L->t[l] + 1.01 * L->h[l] >= t1 ? t1 - L->t[l] : L->h[l];
+        L->ending[l] = fresh0[l] ? L->t[l] + 1.01 * L->h[l] >= t1 : L->ending[l];
+        L->begun[l] = go[l] ? 1 : L->begun[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->scal[i][l] = atol_e + rtol_e * (is_angle[i] * fabs(L->x[i][l]) > 3.141592653589793
+                    ? 3.141592653589793 : fabs(L->x[i][l]));
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fresh[l] = go[l] && L->need_jac[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->jn);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? VSCMG3_ODE_ERR_NONFINITE : L->code[l]) : L->code[l];
+            L->fresh_jac[l] = fresh[l] ? 1 : L->fresh_jac[l];
+            L->need_jac[l] = fresh[l] ? 0 : L->need_jac[l];
+            L->need_lu[l] = fresh[l] ? 1 : L->need_lu[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        L->code[l] = go[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? VSCMG3_ODE_ERR_NONFINITE :
+                VSCMG3_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? VSCMG3_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        gamma_h[l] = 3.637834252744496 / L->h[l];
+        alpha_h[l] = 2.6810828736277523 / L->h[l];
+        beta_h[l] = 3.0504301992474105 / L->h[l];
+        refac[l] = go[l] && L->need_lu[l];
+        sing[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= refac[l];
+    }
+    if (need) {
+
+        /* each lane's kept factors, then E1 and E2 for this h on every lane */
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
+            }
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->piv1[i][l] = L->piv[i][l];
+                L->piv2k[i][l] = L->piv2[i][l];
+            }
+        }
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
+            }
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[i * VSCMG3_NX + i][l] = gamma_h[l] - L->J[i * VSCMG3_NX + i][l];
+                L->e2r[i * VSCMG3_NX + i][l] = alpha_h[l] - L->J[i * VSCMG3_NX + i][l];
+                L->e2i[i * VSCMG3_NX + i][l] = beta_h[l];
+            }
+        }
+        lu_decompose_lanes(L);
+        lu_decompose_complex_lanes(L);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            sing[l] = refac[l] ? L->zero_pivot[l] : sing[l];
+            L->stats_decompositions[l] = refac[l] ? L->stats_decompositions[l] + 1 :
+                    L->stats_decompositions[l];
+        }
+
+        /* a lane that refactors none: its kept factors back */
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
+            }
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->piv[i][l] = refac[l] ? L->piv[i][l] : L->piv1[i][l];
+                L->piv2[i][l] = refac[l] ? L->piv2[i][l] : L->piv2k[i][l];
+            }
+        }
+    }
+
+    /* a singular E1 or E2: so many in a row stop; else h shrunk */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        retry[l] = refac[l] && sing[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : refac[l] ? 0 : L->singular[l];
+        stop[l] = retry[l] && L->singular[l] == 5;
+        L->code[l] = stop[l] ? VSCMG3_ODE_ERR_SINGULAR : L->code[l];
+        retry[l] = retry[l] && !stop[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->reject[l] = retry[l] ? 1 : L->reject[l];
+        L->ending[l] = retry[l] ? 0 : L->ending[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        L->need_jac[l] = retry[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        L->need_lu[l] = refac[l] && !sing[l] ? 0 : L->need_lu[l];
+        go[l] = go[l] && !(refac[l] && sing[l]);
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* the Newton iterations start from the last step's collocation polynomial */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        c3q[l] = L->h[l] / L->h_old[l];
+        c1q[l] = 0.1550510257216822 * c3q[l];
+        c2q[l] = 0.6449489742783178 * c3q[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            double a1, a2, a3;
+            a1 = c1q[l] * (L->ak1[i][l] + (c1q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c1q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a2 = c2q[l] * (L->ak1[i][l] + (c2q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c2q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a3 = c3q[l] * (L->ak1[i][l] + (c3q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c3q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            L->zs1[i][l] = go[l] ? (L->first[l] ? 0.0 : a1) : L->zs1[i][l];
+            L->zs2[i][l] = go[l] ? (L->first[l] ? 0.0 : a2) : L->zs2[i][l];
+            L->zs3[i][l] = go[l] ? (L->first[l] ? 0.0 : a3) : L->zs3[i][l];
+            L->w1[i][l] = go[l] ? (L->first[l] ? 0.0 : 4.325579890063155 * a1 +
+                    0.33919925181580984 * a2 + 0.5417705399358749 * a3) : L->w1[i][l];
+            L->w2[i][l] = go[l] ? (L->first[l] ? 0.0 : -4.178718591551905 * a1 -
+                    0.32768282076106237 * a2 + 0.47662355450055044 * a3) : L->w2[i][l];
+            L->w3[i][l] = go[l] ? (L->first[l] ? 0.0 : -0.5028726349457868 * a1 +
+                    2.571926949855605 * a2 - 0.5960392048282249 * a3) : L->w3[i][l];
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        outcome[l] = 0;
+        L->rate[l] = go[l] ? pow(dmax(L->rate[l], 0.5 * DBL_EPSILON), 0.8) : L->rate[l];
+        L->theta[l] = go[l] ? 1e-3 : L->theta[l];
+        newt[l] = 0;
+        iter[l] = go[l];
+        done[l] = 0;
+    }
+    for (;;) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            iter[l] = iter[l] && outcome[l] == 0 && !done[l];
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (!need) {
+            break;
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (need) {
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs1[i][l] : L->y[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.1550510257216822 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->k[0]);
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs2[i][l] : L->y[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.6449489742783178 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z2);
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs3[i][l] : L->y[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->ts[l] = L->t[l] + L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z3);
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->k[0][i][l];
+                    a2 = L->z2[i][l];
+                    a3 = L->z3[i][l];
+                    L->k[0][i][l] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 +
+                            0.5417705399358749 * a3 - gamma_h[l] * L->w1[i][l];
+                    L->z2[i][l] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 +
+                            0.47662355450055044 * a3 - alpha_h[l] * L->w2[i][l] + beta_h[l] *
+                            L->w3[i][l];
+                    L->z3[i][l] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 -
+                            0.5960392048282249 * a3 - alpha_h[l] * L->w3[i][l] - beta_h[l] *
+                            L->w2[i][l];
+                }
+            }
+            lu_solve_lanes(L, 0);
+            lu_solve_complex_lanes(L);
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                total[l] = iter[l] ? 0.0 : total[l];
+            }
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double s1, s2, s3;
+                    s1 = L->k[0][i][l] / L->scal[i][l];
+                    s2 = L->z2[i][l] / L->scal[i][l];
+                    s3 = L->z3[i][l] / L->scal[i][l];
+                    total[l] = iter[l] ? total[l] + (s1 * s1 + s2 * s2 + s3 * s3) : total[l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                dyno[l] = iter[l] ? sqrt(total[l] / (3 * VSCMG3_NX)) : dyno[l];
+                L->stats_rhs_calls[l] = iter[l] ? L->stats_rhs_calls[l] + 3 : L->stats_rhs_calls[l];
+                newt[l] = iter[l] ? newt[l] + 1 : newt[l];
+                bad[l] = iter[l] ? !(fabs(dyno[l]) <= DBL_MAX) : bad[l];
+                L->nonfinite[l] = iter[l] && bad[l] ? 1 : L->nonfinite[l];
+                outcome[l] = iter[l] && bad[l] ? 2 : outcome[l];
+                thq[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? dyno[l] /
+                        L->dyno_old[l] : thq[l];
+                L->theta[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? (newt[l] == 2
+                        ? thq[l] : sqrt(thq[l] * L->theta_old[l])) : L->theta[l];
+                L->theta_old[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? thq[l] :
+                        L->theta_old[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && !(L->theta[l]
+                        < 0.99) ? 2 : outcome[l];
+                L->rate[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? L->theta[l] / (1.0 - L->theta[l]) : L->rate[l];
+                theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? 1.0 : theta_k[l];
+            }
+            for (j = 0; j < 6; ++j) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) &&
+                            L->theta[l] < 0.99 ? (j >= newt[l] ? theta_k[l] * L->theta[l] :
+                            theta_k[l]) : theta_k[l];
+                }
+            }
+            /* pow, log, exp: scalar calls, as the single trajectory's */
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                predicted[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l]
+                        < 0.99 ? L->rate[l] * dyno[l] * theta_k[l] / newton_tol : predicted[l];
+                q[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] < 0.99
+                        && predicted[l] >= 1.0 ? dmax(1e-4, dmin(20.0, predicted[l])) : q[l];
+                L->h[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? L->h[l] * (0.8 * pow(q[l],
+                        -1.0 / (10 - newt[l]))) : L->h[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? 1 : outcome[l];
+                cont[l] = iter[l] ? outcome[l] == 0 : cont[l];
+                L->dyno_old[l] = iter[l] && cont[l] ? dmax(dyno[l],
+                        0.5 * DBL_EPSILON) : L->dyno_old[l];
+            }
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->w1[i][l] + L->k[0][i][l];
+                    a2 = L->w2[i][l] + L->z2[i][l];
+                    a3 = L->w3[i][l] + L->z3[i][l];
+                    L->w1[i][l] = iter[l] && cont[l] ? a1 : L->w1[i][l];
+                    L->w2[i][l] = iter[l] && cont[l] ? a2 : L->w2[i][l];
+                    L->w3[i][l] = iter[l] && cont[l] ? a3 : L->w3[i][l];
+                    L->zs1[i][l] = iter[l] && cont[l] ? 0.09123239487089295 * a1 -
+                            0.1412552950209542 * a2 - 0.030029194105147424 * a3 : L->zs1[i][l];
+                    L->zs2[i][l] = iter[l] && cont[l] ? 0.241717932707107 * a1 +
+                            0.20412935229379994 * a2 + 0.3829421127572619 * a3 : L->zs2[i][l];
+                    L->zs3[i][l] = iter[l] && cont[l] ? 0.966048182615093 * a1 + a2 : L->zs3[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                done[l] = iter[l] ? cont[l] && !(L->rate[l] * dyno[l] > newton_tol) : done[l];
+                outcome[l] = iter[l] && (cont[l] && !done[l] && newt[l] >= 7) ? 2 : outcome[l];
+            }
+        }
+    }
+
+    /* the error test (radau5's error estimate) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        ok0[l] = go[l] && outcome[l] == 0;
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->eg[i][l] = (-10.048809399827416 * L->zs1[i][l] + 1.382142733160749 * L->zs2[i][l]
+                    - 0.3333333333333333 * L->zs3[i][l]) / L->h[l];
+            L->k[0][i][l] = L->f0[i][l] + L->eg[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        total[l] = 0.0;
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            total[l] = total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] / L->scal[i][l]);
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        norm[l] = sqrt(total[l] / VSCMG3_NX);
+        again[l] = ok0[l] && norm[l] >= 1.0 && (L->first[l] | L->reject[l]);
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= again[l];
+    }
+    if (need) {
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->y[i][l] = again[l] ? L->x[i][l] + L->k[0][i][l] : L->y[i][l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[0]);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_rhs_calls[l] = again[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->k[0][i][l] = L->k[0][i][l] + L->eg[i][l];
+            }
+        }
+        lu_solve_lanes(L, 0);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            total[l] = again[l] ? 0.0 : total[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                total[l] = again[l] ? total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] /
+                        L->scal[i][l]) : total[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            norm[l] = again[l] ? sqrt(total[l] / VSCMG3_NX) : norm[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        err[l] = norm[l] < 1e-10 ? 1e-10 : norm[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->dx[i][l] = L->zs3[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fin[l] = ok0[l] && err[l] < 1.0 && !L->ending[l];
+        badf[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= fin[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_rhs_calls[l] = fin[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                badf[l] = fin[l] ? (badf[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : badf[l];
+            }
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        bad[l] = fin[l] ? badf[l] : !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->nonfinite[l] = ok0[l] ? bad[l] : L->nonfinite[l];
+        outcome[l] = ok0[l] && bad[l] ? 2 : outcome[l];
+    }
+
+    /* Newton failed or too slow, or a NaN or Inf: rejected */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fail[l] = go[l] && outcome[l] != 0;
+        L->stats_rejected[l] = L->stats_rejected[l] + (fail[l] ? 1 : 0);
+        L->reject[l] = fail[l] ? 1 : L->reject[l];
+        L->ending[l] = fail[l] ? 0 : L->ending[l];
+        L->h[l] = fail[l] && outcome[l] == 2 ? L->h[l] * 0.5 : L->h[l];
+        L->need_lu[l] = fail[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = fail[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        go[l] = go[l] && !fail[l];
+        quot[l] = dmax(0.125, dmin(5.0, pow(err[l], 0.25) / dmin(0.9, 13.5 / (newt[l] + 14))));  /* h_new = h / quot */
+        h_new[l] = L->h[l] / quot[l];
+        take[l] = go[l] && err[l] < 1.0;
+        rej[l] = go[l] && !(err[l] < 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(vscmg3_cos_lanes(L->xnew[1][l])) < VSCMG3_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        L->first[l] = ok[l] ? 0 : L->first[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        quot[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(quot[l], dmax(0.125, dmin(5.0,
+                gus[l]))) : quot[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        h_new[l] = L->h[l] / quot[l];
+        L->h_old[l] = ok[l] ? L->h[l] : L->h_old[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            double ak;
+            ak = (L->zs2[i][l] - L->zs1[i][l]) / 0.4898979485566356;
+            L->ak1[i][l] = ok[l] ? (L->zs3[i][l] - L->zs2[i][l]) / 0.35505102572168223 :
+                    L->ak1[i][l];
+            L->ak2[i][l] = ok[l] ? (L->ak1[i][l] - ak) / 0.8449489742783178 : L->ak2[i][l];
+            L->ak3[i][l] = ok[l] ? L->ak2[i][l] - (ak - L->zs1[i][l] / 0.1550510257216822) /
+                    0.6449489742783178 : L->ak3[i][l];
+        }
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->t[l] = ok[l] ? (L->ending[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+        L->code[l] = take[l] && lock[l] ? VSCMG3_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                L->ending[l] ? VSCMG3_ODE_OK : L->code[l];
+    }
+
+    /* after an accepted step that is not the last: the next h, J and factors */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        cont[l] = ok[l] && !L->ending[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->f0[i][l] = cont[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->fresh_jac[l] = cont[l] ? 0 : L->fresh_jac[l];
+        h_new[l] = dmin(h_new[l], L->span[l]);
+        h_new[l] = L->reject[l] ? dmin(h_new[l], L->h[l]) : h_new[l];
+        L->reject[l] = cont[l] ? 0 : L->reject[l];
+        fin[l] = L->t[l] + 1.01 * h_new[l] >= t1;
+        keep[l] = !fin[l] && (L->theta[l] <= 1e-3 && h_new[l] >= 1.0 * L->h[l] && h_new[l] <= 1.2
+                * L->h[l]);
+        L->h[l] = cont[l] ? (fin[l] ? t1 - L->t[l] : keep[l] ? L->h[l] : h_new[l]) : L->h[l];
+        L->ending[l] = cont[l] && fin[l] ? 1 : L->ending[l];
+        L->need_jac[l] = cont[l] && !keep[l] ? L->theta[l] > 1e-3 : L->need_jac[l];
+        L->need_lu[l] = cont[l] && !keep[l] ? 1 : L->need_lu[l];
+    }
+
+    /* a rejected step */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->reject[l] = rej[l] ? 1 : L->reject[l];
+        L->ending[l] = rej[l] ? 0 : L->ending[l];
+        L->h[l] = rej[l] ? (L->first[l] ? L->h[l] * 0.1 : h_new[l]) : L->h[l];
+        L->need_lu[l] = rej[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = rej[l] ? !L->fresh_jac[l] : L->need_jac[l];
+    }
+}
+
+/* One turn of radau5_grid's loop on every lane. */
+static void radau5_grid_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                   double t1, long max_steps)
+{
+    double rtol_e;
+    double atol_e;
+    double newton_tol;
+    int go[VSCMG3_LANES] = {0};
+    int fresh[VSCMG3_LANES] = {0};
+    int bad[VSCMG3_LANES] = {0};
+    int refac[VSCMG3_LANES] = {0};
+    int sing[VSCMG3_LANES] = {0};
+    int retry[VSCMG3_LANES] = {0};
+    int stop[VSCMG3_LANES] = {0};
+    int iter[VSCMG3_LANES] = {0};
+    int done[VSCMG3_LANES] = {0};
+    int cont[VSCMG3_LANES] = {0};
+    int fail[VSCMG3_LANES] = {0};
+    int ok0[VSCMG3_LANES] = {0};
+    int take[VSCMG3_LANES] = {0};
+    int rej[VSCMG3_LANES] = {0};
+    int lock[VSCMG3_LANES] = {0};
+    int ok[VSCMG3_LANES] = {0};
+    int fin[VSCMG3_LANES] = {0};
+    int keep[VSCMG3_LANES] = {0};
+    int again[VSCMG3_LANES] = {0};
+    int badf[VSCMG3_LANES] = {0};
+    int fresh0[VSCMG3_LANES] = {0};
+    double gamma_h[VSCMG3_LANES] = {0};
+    double alpha_h[VSCMG3_LANES] = {0};
+    double beta_h[VSCMG3_LANES] = {0};
+    double total[VSCMG3_LANES] = {0};
+    double norm[VSCMG3_LANES] = {0};
+    double dyno[VSCMG3_LANES] = {0};
+    double thq[VSCMG3_LANES] = {0};
+    double predicted[VSCMG3_LANES] = {0};
+    double q[VSCMG3_LANES] = {0};
+    double theta_k[VSCMG3_LANES] = {0};
+    double err[VSCMG3_LANES] = {0};
+    double quot[VSCMG3_LANES] = {0};
+    double h_new[VSCMG3_LANES] = {0};
+    double gus[VSCMG3_LANES] = {0};
+    double c1q[VSCMG3_LANES] = {0};
+    double c2q[VSCMG3_LANES] = {0};
+    double c3q[VSCMG3_LANES] = {0};
+    int newt[VSCMG3_LANES] = {0};
+    int outcome[VSCMG3_LANES] = {0};
+    static const int stored[126] = {0, 1, 2, 6, 8, 16, 17, 21, 22, 23, 31, 32, 36, 37, 38, 48,
+            49, 50, 51, 52, 53, 54, 55, 56, 57, 58, 59, 63, 64, 65, 66, 67, 68, 69, 70, 71, 72,
+            73, 74, 78, 79, 80, 81, 82, 83, 84, 85, 86, 87, 88, 89, 93, 94, 95, 96, 97, 98, 99,
+            100, 101, 102, 103, 104, 108, 109, 110, 111, 112, 113, 114, 115, 116, 117, 118, 119,
+            123, 124, 125, 126, 127, 128, 129, 130, 131, 132, 133, 134, 138, 139, 140, 141, 142,
+            143, 144, 145, 146, 147, 148, 149, 153, 154, 155, 156, 157, 158, 159, 160, 161, 162,
+            163, 164, 168, 169, 170, 171, 172, 173, 174, 175, 176, 177, 178, 179, 192, 208, 224};
+    double frac[VSCMG3_LANES] = {0};
+    int due[VSCMG3_LANES];
+    static const double is_angle[15] = {1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0};
+    int e, i, j, l;
+    int need;
+    rtol_e = 0.1 * pow(rtol, 0.6666666666666666);
+    atol_e = rtol_e * (atol / rtol);
+    newton_tol = dmax(10.0 * (0.5 * DBL_EPSILON) / rtol_e, dmin(0.03, sqrt(rtol_e)));
+
+    /* a lane's first turn: a last step from t0 (m.name_integrate's start) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        fresh0[l] = go[l] && !L->begun[l];
+        L->h[l] = fresh0[l] && L->t[l] + 1.01 * L->h[l] >= t1 ? t1 - L->t[l] : L->h[l];
+        L->ending[l] = fresh0[l] ? L->t[l] + 1.01 * L->h[l] >= t1 : L->ending[l];
+        L->begun[l] = go[l] ? 1 : L->begun[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->scal[i][l] = atol_e + rtol_e * (is_angle[i] * fabs(L->x[i][l]) > 3.141592653589793
+                    ? 3.141592653589793 : fabs(L->x[i][l]));
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fresh[l] = go[l] && L->need_jac[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->jn);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX * VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->jn[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->J[stored[e]][l] = fresh[l] ? L->jn[stored[e]][l] : L->J[stored[e]][l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? VSCMG3_ODE_ERR_NONFINITE : L->code[l]) : L->code[l];
+            L->fresh_jac[l] = fresh[l] ? 1 : L->fresh_jac[l];
+            L->need_jac[l] = fresh[l] ? 0 : L->need_jac[l];
+            L->need_lu[l] = fresh[l] ? 1 : L->need_lu[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        go[l] = L->code[l] < 0;
+        L->code[l] = go[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? VSCMG3_ODE_ERR_NONFINITE :
+                VSCMG3_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] + L->stats_rejected[l] >=
+                max_steps ? VSCMG3_ODE_ERR_MAX_STEPS : -1) : L->code[l];
+        go[l] = L->code[l] < 0;
+        gamma_h[l] = 3.637834252744496 / L->h[l];
+        alpha_h[l] = 2.6810828736277523 / L->h[l];
+        beta_h[l] = 3.0504301992474105 / L->h[l];
+        refac[l] = go[l] && L->need_lu[l];
+        sing[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= refac[l];
+    }
+    if (need) {
+
+        /* each lane's kept factors, then E1 and E2 for this h on every lane */
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->e1[stored[e]][l] = L->lu[stored[e]][l];
+                L->e2rk[stored[e]][l] = L->e2r[stored[e]][l];
+                L->e2ik[stored[e]][l] = L->e2i[stored[e]][l];
+            }
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->piv1[i][l] = L->piv[i][l];
+                L->piv2k[i][l] = L->piv2[i][l];
+            }
+        }
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2r[stored[e]][l] = -L->J[stored[e]][l];
+                L->e2i[stored[e]][l] = 0.0;
+            }
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[i * VSCMG3_NX + i][l] = gamma_h[l] - L->J[i * VSCMG3_NX + i][l];
+                L->e2r[i * VSCMG3_NX + i][l] = alpha_h[l] - L->J[i * VSCMG3_NX + i][l];
+                L->e2i[i * VSCMG3_NX + i][l] = beta_h[l];
+            }
+        }
+        lu_decompose_lanes(L);
+        lu_decompose_complex_lanes(L);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            sing[l] = refac[l] ? L->zero_pivot[l] : sing[l];
+            L->stats_decompositions[l] = refac[l] ? L->stats_decompositions[l] + 1 :
+                    L->stats_decompositions[l];
+        }
+
+        /* a lane that refactors none: its kept factors back */
+        for (e = 0; e < 126; ++e) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->lu[stored[e]][l] = refac[l] ? L->lu[stored[e]][l] : L->e1[stored[e]][l];
+                L->e2r[stored[e]][l] = refac[l] ? L->e2r[stored[e]][l] : L->e2rk[stored[e]][l];
+                L->e2i[stored[e]][l] = refac[l] ? L->e2i[stored[e]][l] : L->e2ik[stored[e]][l];
+            }
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->piv[i][l] = refac[l] ? L->piv[i][l] : L->piv1[i][l];
+                L->piv2[i][l] = refac[l] ? L->piv2[i][l] : L->piv2k[i][l];
+            }
+        }
+    }
+
+    /* a singular E1 or E2: so many in a row stop; else h shrunk */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        retry[l] = refac[l] && sing[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : refac[l] ? 0 : L->singular[l];
+        stop[l] = retry[l] && L->singular[l] == 5;
+        L->code[l] = stop[l] ? VSCMG3_ODE_ERR_SINGULAR : L->code[l];
+        retry[l] = retry[l] && !stop[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->reject[l] = retry[l] ? 1 : L->reject[l];
+        L->ending[l] = retry[l] ? 0 : L->ending[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        L->need_jac[l] = retry[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        L->need_lu[l] = refac[l] && !sing[l] ? 0 : L->need_lu[l];
+        go[l] = go[l] && !(refac[l] && sing[l]);
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* the Newton iterations start from the last step's collocation polynomial */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        c3q[l] = L->h[l] / L->h_old[l];
+        c1q[l] = 0.1550510257216822 * c3q[l];
+        c2q[l] = 0.6449489742783178 * c3q[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            double a1, a2, a3;
+            a1 = c1q[l] * (L->ak1[i][l] + (c1q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c1q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a2 = c2q[l] * (L->ak1[i][l] + (c2q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c2q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            a3 = c3q[l] * (L->ak1[i][l] + (c3q[l] + 0.35505102572168223) * (L->ak2[i][l] +
+                    (c3q[l] + 0.8449489742783178) * L->ak3[i][l]));
+            L->zs1[i][l] = go[l] ? (L->first[l] ? 0.0 : a1) : L->zs1[i][l];
+            L->zs2[i][l] = go[l] ? (L->first[l] ? 0.0 : a2) : L->zs2[i][l];
+            L->zs3[i][l] = go[l] ? (L->first[l] ? 0.0 : a3) : L->zs3[i][l];
+            L->w1[i][l] = go[l] ? (L->first[l] ? 0.0 : 4.325579890063155 * a1 +
+                    0.33919925181580984 * a2 + 0.5417705399358749 * a3) : L->w1[i][l];
+            L->w2[i][l] = go[l] ? (L->first[l] ? 0.0 : -4.178718591551905 * a1 -
+                    0.32768282076106237 * a2 + 0.47662355450055044 * a3) : L->w2[i][l];
+            L->w3[i][l] = go[l] ? (L->first[l] ? 0.0 : -0.5028726349457868 * a1 +
+                    2.571926949855605 * a2 - 0.5960392048282249 * a3) : L->w3[i][l];
+        }
+    }
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        outcome[l] = 0;
+        L->rate[l] = go[l] ? pow(dmax(L->rate[l], 0.5 * DBL_EPSILON), 0.8) : L->rate[l];
+        L->theta[l] = go[l] ? 1e-3 : L->theta[l];
+        newt[l] = 0;
+        iter[l] = go[l];
+        done[l] = 0;
+    }
+    for (;;) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            iter[l] = iter[l] && outcome[l] == 0 && !done[l];
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (!need) {
+            break;
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= iter[l];
+        }
+        if (need) {
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs1[i][l] : L->y[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.1550510257216822 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->k[0]);
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs2[i][l] : L->y[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->ts[l] = L->t[l] + 0.6449489742783178 * L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z2);
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    L->y[i][l] = iter[l] ? L->x[i][l] + L->zs3[i][l] : L->y[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->ts[l] = L->t[l] + L->h[l];
+            }
+            rhs_lanes(L->ts, L->y, c, L->z3);
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->k[0][i][l];
+                    a2 = L->z2[i][l];
+                    a3 = L->z3[i][l];
+                    L->k[0][i][l] = 4.325579890063155 * a1 + 0.33919925181580984 * a2 +
+                            0.5417705399358749 * a3 - gamma_h[l] * L->w1[i][l];
+                    L->z2[i][l] = -4.178718591551905 * a1 - 0.32768282076106237 * a2 +
+                            0.47662355450055044 * a3 - alpha_h[l] * L->w2[i][l] + beta_h[l] *
+                            L->w3[i][l];
+                    L->z3[i][l] = -0.5028726349457868 * a1 + 2.571926949855605 * a2 -
+                            0.5960392048282249 * a3 - alpha_h[l] * L->w3[i][l] - beta_h[l] *
+                            L->w2[i][l];
+                }
+            }
+            lu_solve_lanes(L, 0);
+            lu_solve_complex_lanes(L);
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                total[l] = iter[l] ? 0.0 : total[l];
+            }
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double s1, s2, s3;
+                    s1 = L->k[0][i][l] / L->scal[i][l];
+                    s2 = L->z2[i][l] / L->scal[i][l];
+                    s3 = L->z3[i][l] / L->scal[i][l];
+                    total[l] = iter[l] ? total[l] + (s1 * s1 + s2 * s2 + s3 * s3) : total[l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                dyno[l] = iter[l] ? sqrt(total[l] / (3 * VSCMG3_NX)) : dyno[l];
+                L->stats_rhs_calls[l] = iter[l] ? L->stats_rhs_calls[l] + 3 : L->stats_rhs_calls[l];
+                newt[l] = iter[l] ? newt[l] + 1 : newt[l];
+                bad[l] = iter[l] ? !(fabs(dyno[l]) <= DBL_MAX) : bad[l];
+                L->nonfinite[l] = iter[l] && bad[l] ? 1 : L->nonfinite[l];
+                outcome[l] = iter[l] && bad[l] ? 2 : outcome[l];
+                thq[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? dyno[l] /
+                        L->dyno_old[l] : thq[l];
+                L->theta[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? (newt[l] == 2
+                        ? thq[l] : sqrt(thq[l] * L->theta_old[l])) : L->theta[l];
+                L->theta_old[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) ? thq[l] :
+                        L->theta_old[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && !(L->theta[l]
+                        < 0.99) ? 2 : outcome[l];
+                L->rate[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? L->theta[l] / (1.0 - L->theta[l]) : L->rate[l];
+                theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 ? 1.0 : theta_k[l];
+            }
+            for (j = 0; j < 6; ++j) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    theta_k[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) &&
+                            L->theta[l] < 0.99 ? (j >= newt[l] ? theta_k[l] * L->theta[l] :
+                            theta_k[l]) : theta_k[l];
+                }
+            }
+            /* pow, log, exp: scalar calls, as the single trajectory's */
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                predicted[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l]
+                        < 0.99 ? L->rate[l] * dyno[l] * theta_k[l] / newton_tol : predicted[l];
+                q[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] < 0.99
+                        && predicted[l] >= 1.0 ? dmax(1e-4, dmin(20.0, predicted[l])) : q[l];
+                L->h[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? L->h[l] * (0.8 * pow(q[l],
+                        -1.0 / (10 - newt[l]))) : L->h[l];
+                outcome[l] = iter[l] && (!bad[l] && newt[l] > 1 && newt[l] < 7) && L->theta[l] <
+                        0.99 && predicted[l] >= 1.0 ? 1 : outcome[l];
+                cont[l] = iter[l] ? outcome[l] == 0 : cont[l];
+                L->dyno_old[l] = iter[l] && cont[l] ? dmax(dyno[l],
+                        0.5 * DBL_EPSILON) : L->dyno_old[l];
+            }
+            for (i = 0; i < VSCMG3_NX; ++i) {
+                VSCMG3_SIMD
+                for (l = 0; l < VSCMG3_LANES; ++l) {
+                    double a1, a2, a3;
+                    a1 = L->w1[i][l] + L->k[0][i][l];
+                    a2 = L->w2[i][l] + L->z2[i][l];
+                    a3 = L->w3[i][l] + L->z3[i][l];
+                    L->w1[i][l] = iter[l] && cont[l] ? a1 : L->w1[i][l];
+                    L->w2[i][l] = iter[l] && cont[l] ? a2 : L->w2[i][l];
+                    L->w3[i][l] = iter[l] && cont[l] ? a3 : L->w3[i][l];
+                    L->zs1[i][l] = iter[l] && cont[l] ? 0.09123239487089295 * a1 -
+                            0.1412552950209542 * a2 - 0.030029194105147424 * a3 : L->zs1[i][l];
+                    L->zs2[i][l] = iter[l] && cont[l] ? 0.241717932707107 * a1 +
+                            0.20412935229379994 * a2 + 0.3829421127572619 * a3 : L->zs2[i][l];
+                    L->zs3[i][l] = iter[l] && cont[l] ? 0.966048182615093 * a1 + a2 : L->zs3[i][l];
+                }
+            }
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                done[l] = iter[l] ? cont[l] && !(L->rate[l] * dyno[l] > newton_tol) : done[l];
+                outcome[l] = iter[l] && (cont[l] && !done[l] && newt[l] >= 7) ? 2 : outcome[l];
+            }
+        }
+    }
+
+    /* the error test (radau5's error estimate) */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        ok0[l] = go[l] && outcome[l] == 0;
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->eg[i][l] = (-10.048809399827416 * L->zs1[i][l] + 1.382142733160749 * L->zs2[i][l]
+                    - 0.3333333333333333 * L->zs3[i][l]) / L->h[l];
+            L->k[0][i][l] = L->f0[i][l] + L->eg[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        total[l] = 0.0;
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            total[l] = total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] / L->scal[i][l]);
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        norm[l] = sqrt(total[l] / VSCMG3_NX);
+        again[l] = ok0[l] && norm[l] >= 1.0 && (L->first[l] | L->reject[l]);
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= again[l];
+    }
+    if (need) {
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->y[i][l] = again[l] ? L->x[i][l] + L->k[0][i][l] : L->y[i][l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        rhs_lanes(L->ts, L->y, c, L->k[0]);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_rhs_calls[l] = again[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->k[0][i][l] = L->k[0][i][l] + L->eg[i][l];
+            }
+        }
+        lu_solve_lanes(L, 0);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            total[l] = again[l] ? 0.0 : total[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                total[l] = again[l] ? total[l] + L->k[0][i][l] / L->scal[i][l] * (L->k[0][i][l] /
+                        L->scal[i][l]) : total[l];
+            }
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            norm[l] = again[l] ? sqrt(total[l] / VSCMG3_NX) : norm[l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        err[l] = norm[l] < 1e-10 ? 1e-10 : norm[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->dx[i][l] = L->zs3[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fin[l] = ok0[l] && err[l] < 1.0 && !L->ending[l];
+        badf[l] = 0;
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= fin[l];
+    }
+    if (need) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->stats_rhs_calls[l] = fin[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                badf[l] = fin[l] ? (badf[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : badf[l];
+            }
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        bad[l] = fin[l] ? badf[l] : !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->nonfinite[l] = ok0[l] ? bad[l] : L->nonfinite[l];
+        outcome[l] = ok0[l] && bad[l] ? 2 : outcome[l];
+    }
+
+    /* Newton failed or too slow, or a NaN or Inf: rejected */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        fail[l] = go[l] && outcome[l] != 0;
+        L->stats_rejected[l] = L->stats_rejected[l] + (fail[l] ? 1 : 0);
+        L->reject[l] = fail[l] ? 1 : L->reject[l];
+        L->ending[l] = fail[l] ? 0 : L->ending[l];
+        L->h[l] = fail[l] && outcome[l] == 2 ? L->h[l] * 0.5 : L->h[l];
+        L->need_lu[l] = fail[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = fail[l] ? !L->fresh_jac[l] : L->need_jac[l];
+        go[l] = go[l] && !fail[l];
+        quot[l] = dmax(0.125, dmin(5.0, pow(err[l], 0.25) / dmin(0.9, 13.5 / (newt[l] + 14))));  /* h_new = h / quot */
+        h_new[l] = L->h[l] / quot[l];
+        take[l] = go[l] && err[l] < 1.0;
+        rej[l] = go[l] && !(err[l] < 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(vscmg3_cos_lanes(L->xnew[1][l])) < VSCMG3_ODE_GIMBAL_LOCK_COS : 0) ||
+                fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        L->first[l] = ok[l] ? 0 : L->first[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        quot[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(quot[l], dmax(0.125, dmin(5.0,
+                gus[l]))) : quot[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        h_new[l] = L->h[l] / quot[l];
+        L->h_old[l] = ok[l] ? L->h[l] : L->h_old[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            double ak;
+            ak = (L->zs2[i][l] - L->zs1[i][l]) / 0.4898979485566356;
+            L->ak1[i][l] = ok[l] ? (L->zs3[i][l] - L->zs2[i][l]) / 0.35505102572168223 :
+                    L->ak1[i][l];
+            L->ak2[i][l] = ok[l] ? (L->ak1[i][l] - ak) / 0.8449489742783178 : L->ak2[i][l];
+            L->ak3[i][l] = ok[l] ? L->ak2[i][l] - (ak - L->zs1[i][l] / 0.1550510257216822) /
+                    0.6449489742783178 : L->ak3[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        due[l] = ok[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (L->ending[l] ? t1 :
+                L->t[l] + L->h[l]));
+    }
+    for (;;) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            due[l] = due[l] && (L->g[l] < L->ntimes && L->times[L->g[l]] < (L->ending[l] ? t1 :
+                    L->t[l] + L->h[l]));
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (!need) {
+            break;
+        }
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            frac[l] = due[l] ? (L->times[L->g[l]] - (L->ending[l] ? t1 : L->t[l] + L->h[l])) /
+                    L->h[l] : frac[l];
+        }
+        for (i = 0; i < VSCMG3_NX; ++i) {
+            VSCMG3_SIMD
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                L->y[i][l] = L->xnew[i][l] + frac[l] * (L->ak1[i][l] + (frac[l] +
+                        0.35505102572168223) * (L->ak2[i][l] + (frac[l] + 0.8449489742783178) *
+                        L->ak3[i][l]));
+            }
+        }
+        need = 0;
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            need |= due[l];
+        }
+        if (need) {
+            for (l = 0; l < VSCMG3_LANES; ++l) {
+                if (due[l]) {
+                    for (i = 0; i < VSCMG3_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->y[i][l];
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->t[l] = ok[l] ? (L->ending[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < VSCMG3_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? VSCMG3_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                L->ending[l] ? VSCMG3_ODE_OK : L->code[l];
+    }
+
+    /* after an accepted step that is not the last: the next h, J and factors */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        cont[l] = ok[l] && !L->ending[l];
+    }
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        VSCMG3_SIMD
+        for (l = 0; l < VSCMG3_LANES; ++l) {
+            L->f0[i][l] = cont[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->fresh_jac[l] = cont[l] ? 0 : L->fresh_jac[l];
+        h_new[l] = dmin(h_new[l], L->span[l]);
+        h_new[l] = L->reject[l] ? dmin(h_new[l], L->h[l]) : h_new[l];
+        L->reject[l] = cont[l] ? 0 : L->reject[l];
+        fin[l] = L->t[l] + 1.01 * h_new[l] >= t1;
+        keep[l] = !fin[l] && (L->theta[l] <= 1e-3 && h_new[l] >= 1.0 * L->h[l] && h_new[l] <= 1.2
+                * L->h[l]);
+        L->h[l] = cont[l] ? (fin[l] ? t1 - L->t[l] : keep[l] ? L->h[l] : h_new[l]) : L->h[l];
+        L->ending[l] = cont[l] && fin[l] ? 1 : L->ending[l];
+        L->need_jac[l] = cont[l] && !keep[l] ? L->theta[l] > 1e-3 : L->need_jac[l];
+        L->need_lu[l] = cont[l] && !keep[l] ? 1 : L->need_lu[l];
+    }
+
+    /* a rejected step */
+    VSCMG3_SIMD
+    for (l = 0; l < VSCMG3_LANES; ++l) {
+        L->reject[l] = rej[l] ? 1 : L->reject[l];
+        L->ending[l] = rej[l] ? 0 : L->ending[l];
+        L->h[l] = rej[l] ? (L->first[l] ? L->h[l] * 0.1 : h_new[l]) : L->h[l];
+        L->need_lu[l] = rej[l] ? 1 : L->need_lu[l];
+        L->need_jac[l] = rej[l] ? !L->fresh_jac[l] : L->need_jac[l];
+    }
+}
+
 /* The normalized Taylor coefficients of x and of the rhs's 237 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *inv)
 {
@@ -8346,6 +10358,24 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     L->err_acc[l] = 1e-2;
     L->singular[l] = 0;
     L->new_point[l] = 1;
+    L->h_old[l] = 1.0;
+    L->rate[l] = 1.0;
+    L->theta_old[l] = 1.0;
+    L->dyno_old[l] = 1.0;
+    L->first[l] = 1;
+    L->reject[l] = 0;
+    L->fresh_jac[l] = 0;
+    L->need_jac[l] = 1;
+    L->need_lu[l] = 1;
+    L->begun[l] = 0;
+    L->ending[l] = 0;
+    L->span[l] = t1 - t0;
+    #pragma GCC unroll 1
+    for (i = 0; i < VSCMG3_NX; ++i) {
+        L->ak1[i][l] = 0.0;
+        L->ak2[i][l] = 0.0;
+        L->ak3[i][l] = 0.0;
+    }
     L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
     L->stats_h[l] = stats->h;
@@ -11009,13 +13039,20 @@ int vscmg3_radau5_grid(long ntimes, const double *times, double *x, const double
             (double (*)[VSCMG3_NX])out, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. VSCMG3_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its _grid, a lane alone costs ~1.7x); every core under OpenMP. A bad
+   grid: each state's _grid says so. */
 size_t vscmg3_radau5_grid_batch(size_t n, long ntimes, const double *times, double *x,
                                 const double *c, double rtol, double atol, double h0,
                                 long max_steps, double *out, vscmg3_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(radau5_grid_step_lanes, 5, VSCMG3_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[VSCMG3_NX])out, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -14078,13 +16115,18 @@ size_t vscmg3_rodas4_batch(size_t n, double t0, double t1, double *x, const doub
     return failed;
 }
 
-/* NULL stats or codes: not wanted. Every core under OpenMP. */
+/* NULL stats or codes: not wanted. VSCMG3_LANES trajectories at once, in SIMD lanes
+   (one trajectory: its plain call, a lane alone costs ~1.7x); every core under OpenMP. */
 size_t vscmg3_radau5_batch(size_t n, double t0, double t1, double *x, const double *c,
                            double rtol, double atol, double h0, long max_steps,
                            vscmg3_stats *stats, int *codes)
 {
     size_t failed = 0;
     long i;
+    if (n > 1) {
+        return pair_batch(radau5_step_lanes, 5, VSCMG3_ODE_MIN_RTOL, n,
+                          t0, t1, x, c, rtol, atol, h0, max_steps, 0, NULL, NULL, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

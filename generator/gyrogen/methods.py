@@ -214,8 +214,8 @@ class Method:
     @property
     def lanes(self) -> bool:
         """Its batch runs trajectories in SIMD lanes (an explicit pair,
-        Taylor, a Rosenbrock method)."""
-        return self.pair or self.taylor or self.rosenbrock
+        Taylor, a Rosenbrock method, Radau IIA)."""
+        return self.pair or self.taylor or self.rosenbrock or self.radau
 
     @property
     def start_order(self) -> int:

@@ -1,14 +1,15 @@
 /*
  * The lane-batched integrators without Python: integrates a batch of
  * perturbed default-scene states with dop853_batch, dopri5_batch,
- * rk4_batch and rodas4_batch, and each state again with the single-trajectory function;
+ * rk4_batch, rodas4_batch and radau5_batch, and each state again with the single-trajectory
+ * function;
  * writes every final state, statistics record and code (binary, batch
  * first, then single). tests/test_lanes.py builds it with several
  * GYROSTAT_LANES values, with and without OpenMP, and compares the bytes.
  *
  * Usage: lanes N OUT. Trajectory 3 starts with a NaN (code 3), trajectory 5
  * is given q2 = 1.57 and u1 = 2 (gimbal lock: code 6 under rk4); the
- * second dop853 and rodas4 batches have a budget of 20 steps (code 2 for
+ * second dop853, rodas4 and radau5 batches have a budget of 20 steps (code 2 for
  * some).
  */
 #include <math.h>
@@ -106,6 +107,19 @@ int main(int argc, char **argv)
             } else {
                 for (i = 0; i < n; ++i) {
                     codes[i] = gyrostat_rodas4(0.0, 3.0, xs + i * NX, c, 1e-7, 1e-9, 0.0,
+                                               budget[b], st + i);
+                }
+            }
+            put(out, xs, st, codes, n);
+        }
+        for (b = 0; b < 2; ++b) {
+            start(xs, n);
+            if (run == 0) {
+                gyrostat_radau5_batch((size_t)n, 0.0, 3.0, xs, c, 1e-7, 1e-9, 0.0, budget[b], st,
+                                      codes);
+            } else {
+                for (i = 0; i < n; ++i) {
+                    codes[i] = gyrostat_radau5(0.0, 3.0, xs + i * NX, c, 1e-7, 1e-9, 0.0,
                                                budget[b], st + i);
                 }
             }

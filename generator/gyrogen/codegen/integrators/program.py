@@ -110,6 +110,7 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
 
 
 def _radau(m: Method, g: Given) -> Parts:
+    assert g.blocks is not None, "an implicit method needs the Jacobian's blocks"
     return Parts(
         [
             radau.factor(m),
@@ -118,7 +119,13 @@ def _radau(m: Method, g: Given) -> Parts:
             radau_step.integrate(m, g.quaternion, knots=g.knots),
             radau_step.integrate(m, g.quaternion, True, g.knots),
             *([radau_step.integrate(m, g.quaternion, g.events, g.knots)] if g.events else []),
-        ]
+        ],
+        [
+            radau_step.lanes_step(m, g.quaternion, g.blocks, knots=g.knots),
+            radau_step.lanes_step(m, g.quaternion, g.blocks, True, g.knots),
+        ],
+        radau_step.lane_state(m),
+        radau_step.lane_start(m),
     )
 
 
@@ -227,7 +234,12 @@ def lane_candidates(blocks: Blocks | None) -> list[Func]:
     if blocks is None:
         return []
     nx = len(blocks.end)
-    return [linear.decompose_lanes(blocks, nx), linear.solve_lanes(blocks, nx)]
+    return [
+        linear.decompose_lanes(blocks, nx),
+        linear.solve_lanes(blocks, nx),
+        linear.decompose_complex_lanes(blocks, nx),
+        linear.solve_complex_lanes(blocks, nx),
+    ]
 
 
 def larger(old: Decl | None, new: Decl) -> Decl:

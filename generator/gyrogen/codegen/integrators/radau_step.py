@@ -5,21 +5,30 @@ predictive controller, J and the factors kept while they serve."""
 
 from __future__ import annotations
 
-from gyrogen.codegen.integrators import driver
+from gyrogen.codegen.integrators import driver, linear
+from gyrogen.codegen.integrators import quaternion as euler_parameters
 from gyrogen.codegen.integrators.common import (
+    NE,
+    NX,
+    accepted,
     comp,
     dx,
     finite_state,
     h,
     i,
+    locked,
     size,
     x,
     xnew,
 )
-from gyrogen.codegen.integrators.radau import EPS, c, dot, each, matrix, pivots, t
+from gyrogen.codegen.integrators.explicit import at
+from gyrogen.codegen.integrators.radau import EPS, c, dot, each, matrix, pivots, t, y
 from gyrogen.codegen.ir.nodes import (
+    Bool,
     Break,
+    Call,
     Comment,
+    Const,
     Continue,
     Decl,
     E,
@@ -29,6 +38,7 @@ from gyrogen.codegen.ir.nodes import (
     Int,
     Loop,
     Num,
+    Row,
     S,
     Var,
     and_,
@@ -43,6 +53,7 @@ from gyrogen.codegen.ir.nodes import (
 )
 from gyrogen.codegen.ir.nodes import real as scalar
 from gyrogen.methods import Method, RadauControl
+from gyrogen.symbolic.blocks import Blocks
 from gyrogen.tableaus import Radau
 
 V = {n: Var(n) for n in (
@@ -293,4 +304,406 @@ def integrate(
     return Func(f"{m.name}_integrate", driver.PARAMS, body, "int", locals_, doc)
 
 
-__all__ = ["integrate"]
+# Over SIMD lanes: one turn of m.name_integrate's loop on every lane, its
+# branches as selections (gyrogen.codegen.ir.lanes). The Newton iterations
+# are a loop whose turns go on while any lane iterates; E1 and E2 are the
+# struct's lu, piv and e2r, e2i, piv2 (linear's LU over lanes), kept from
+# step to step: a lane that refactors none keeps its own by selection.
+
+L = {n: Var(n) for n in (
+    "zs1 zs2 zs3 jn e1 e2rk e2ik piv2k eg span begun go fresh bad refac sing retry stop iter "
+    "done cont fail ok0 take rej lock ok fin keep gamma_h alpha_h beta_h total norm again "
+    "badf fresh0 code ending"
+).split()}  # fmt: skip
+LANE_ROWS = ("zs1", "zs2", "zs3", "w1", "w2", "w3", "ak1", "ak2", "ak3", "f0", "fnew", "scal", "eg")
+LANE_BOOLS = ("ending", "first", "reject", "fresh_jac", "need_jac", "need_lu", "begun")
+LANE_REALS = ("h_old", "h_acc", "err_acc", "rate", "theta", "theta_old", "dyno_old", "span")
+STEP_BOOLS = ("go", "fresh", "bad", "refac", "sing", "retry", "stop", "iter", "done", "cont",
+              "fail", "ok0", "take", "rej", "lock", "ok", "fin", "keep", "again", "badf",
+              "fresh0")  # fmt: skip
+STEP_REALS = ("gamma_h", "alpha_h", "beta_h", "total", "norm", "dyno", "thq", "predicted", "q",
+              "theta_k", "err", "quot", "h_new", "gus",  "c1q", "c2q", "c3q")  # fmt: skip
+
+
+def _any_nonfinite(flag: Var, values: Var, n: E) -> list[S]:
+    """flag := flag or a NaN or Inf among values[0..n-1] (all_finite, over lanes)."""
+    return [For("i", n, (assign(flag, or_(flag, not_(fn("finite", values[i])))),))]
+
+
+def lanes_step(
+    m: Method, quaternion: bool, blocks: Blocks, grid: bool = False, knots: driver.Knots = ()
+) -> Func:
+    """m.name_step_lanes: one turn of m.name_integrate's loop on every lane,
+    each branch a selection (a lane that stopped, whose E1 or E2 is singular
+    or whose Newton iterations fail computes on and keeps nothing); its
+    Newton iterations a loop while any lane iterates (a lane that converged
+    or failed keeps its values); E1 and E2 factored on every lane when any
+    lane needs them (each lane's own kept factors restored by selection),
+    solved by linear's functions over lanes. With grid,
+    m.name_grid_step_lanes (driver.passed, driver.reached)."""
+    R, ctl = m.tableau, m.control
+    assert isinstance(R, Radau) and isinstance(ctl, RadauControl)
+    v, w = V, L
+    c1, c2 = R.nodes[0], R.nodes[1]
+    control = driver.Gustafsson(ctl)
+    cd, go, last, first = w["code"], w["go"], w["ending"], v["first"]
+    k0 = Row("k", Int(0))
+    kk = Var("k")
+    z2s, z3s = Var("z2"), Var("z3")  # the complex system's right-hand side and solution
+    zs = [w["zs1"], w["zs2"], w["zs3"]]
+    ws = [v["w1"], v["w2"], v["w3"]]
+    avars = [v["a1"], v["a2"], v["a3"]]
+    a: list[E] = list(avars)
+    t1 = Var("t1")
+    row = driver.BASE + driver.G
+    nx2 = Const("NX2")
+    # the entries of J and the factors the LU reads and writes (linear.shift's)
+    nx = len(blocks.end)
+    stored = tuple(r * nx + col for r, cols in enumerate(blocks.stored) for col in cols)
+    entries, at_e = Int(len(stored)), Var("stored")[Var("e")]
+
+    def rejected(when: E) -> list[S]:
+        return [
+            driver.count("rejected", sel(when, Int(1), Int(0))),
+            assign(v["reject"], sel(when, True, v["reject"])),
+            assign(last, sel(when, False, last)),
+        ]
+
+    fresh0 = w["fresh0"]
+    start: list[S] = [
+        Comment("a lane's first turn: a last step from t0 (m.name_integrate's start)"),
+        assign(go, cmp(cd, "<", 0)),
+        assign(fresh0, and_(go, not_(w["begun"]))),
+        *driver.next_knot(knots),
+        assign(h, sel(and_(fresh0, driver.final_step(knots)), t1 - t, h)),
+        assign(last, sel(fresh0, driver.final_step(knots), last)),
+        *driver.knot_clip(knots, last, fresh0),
+        assign(w["begun"], sel(go, True, w["begun"])),
+        each(assign(v["scal"][i], v["atol_e"] + v["rtol_e"] * size(i, x))),
+    ]
+    fresh, bad, jn = w["fresh"], w["bad"], w["jn"]
+    jacobian: list[S] = [
+        assign(fresh, and_(go, v["need_jac"])),
+        assign(bad, False),
+        If(fresh, (
+            Call("jac", (t, x, c, jn)),
+            driver.count("jac_calls", 1),
+            *_any_nonfinite(bad, jn, nx2),
+            For("e", entries, (assign(v["J"][at_e], jn[at_e]),)),
+            assign(cd, sel(bad, driver.ERR_NONFINITE, cd)),
+            assign(v["fresh_jac"], True),
+            assign(v["need_jac"], False),
+            assign(v["need_lu"], True),
+        ), own=("jn",)),
+        assign(go, cmp(cd, "<", 0)),
+        assign(cd, sel(go, driver.stop_code(v["nonfinite"]), cd)),
+        assign(go, cmp(cd, "<", 0)),
+    ]  # fmt: skip
+    need, sing, retry, stop = w["refac"], w["sing"], w["retry"], w["stop"]
+    lu, piv, e2r, e2i, piv2 = Var("lu"), Var("piv"), Var("e2r"), Var("e2i"), Var("piv2")
+    e1, e2rk, e2ik, piv1, piv2k = w["e1"], w["e2rk"], w["e2ik"], v["piv1"], w["piv2k"]
+    g_, a_, b_ = w["gamma_h"], w["alpha_h"], w["beta_h"]
+    J = v["J"]
+    diag = i * NX + i
+    factors: list[S] = [
+        assign(g_, Num(R.gamma) / h),
+        assign(a_, Num(R.alpha) / h),
+        assign(b_, Num(R.beta) / h),
+        assign(need, and_(go, v["need_lu"])),
+        assign(sing, False),
+        If(need, (
+            Comment("each lane's kept factors, then E1 and E2 for this h on every lane"),
+            For("e", entries, (assign(e1[at_e], lu[at_e]), assign(e2rk[at_e], e2r[at_e]),
+                               assign(e2ik[at_e], e2i[at_e]))),
+            each(assign(piv1[i], piv[i]), assign(piv2k[i], piv2[i])),
+            For("e", entries, (assign(lu[at_e], -J[at_e]), assign(e2r[at_e], -J[at_e]),
+                               assign(e2i[at_e], 0.0))),
+            each(assign(lu[diag], g_ - J[diag]), assign(e2r[diag], a_ - J[diag]),
+                 assign(e2i[diag], b_)),
+            Call("lu_decompose", (), "E1's LU on every lane, each its own pivots"),
+            Call("lu_decompose_complex", (), "E2's"),
+            assign(sing, linear.ZERO_PIVOT),
+            driver.count("decompositions", 1),
+            Comment("a lane that refactors none: its kept factors back"),
+            For("e", entries, (assign(lu[at_e], sel(need, lu[at_e], e1[at_e])),
+                               assign(e2r[at_e], sel(need, e2r[at_e], e2rk[at_e])),
+                               assign(e2i[at_e], sel(need, e2i[at_e], e2ik[at_e])))),
+            each(assign(piv[i], sel(need, piv[i], piv1[i])),
+                 assign(piv2[i], sel(need, piv2[i], piv2k[i]))),
+        ), own=("e1", "e2rk", "e2ik", "piv1", "piv2k", "lu", "e2r", "e2i", "piv", "piv2")),
+        Comment("a singular E1 or E2: so many in a row stop; else h shrunk"),
+        assign(retry, and_(need, sing)),
+        assign(v["singular"], sel(retry, v["singular"] + 1, sel(need, 0, v["singular"]))),
+        assign(stop, and_(retry, cmp(v["singular"], "==", ctl.singular_tries))),
+        assign(cd, sel(stop, driver.ERR_SINGULAR, cd)),
+        assign(retry, and_(retry, not_(stop))),
+        *rejected(retry),
+        assign(h, sel(retry, h * Num(ctl.newton_shrink), h)),
+        assign(v["need_jac"], sel(retry, not_(v["fresh_jac"]), v["need_jac"])),
+        assign(v["need_lu"], sel(and_(need, not_(sing)), False, v["need_lu"])),
+        assign(go, and_(go, not_(and_(need, sing)))),
+        assign(driver.stat("h"), sel(go, h, driver.stat("h"))),
+    ]  # fmt: skip
+
+    def extrapolated(cq: Var) -> E:
+        inner = v["ak2"][i] + (cq + Num(1.0 - c1)) * v["ak3"][i]
+        return cq * (v["ak1"][i] + (cq + Num(1.0 - c2)) * inner)
+
+    newt, dyno, theta, rate, outcome = v["newt"], v["dyno"], v["theta"], v["rate"], v["outcome"]
+    begin_newton: list[S] = [
+        Comment("the Newton iterations start from the last step's collocation polynomial"),
+        assign(v["c3q"], h / v["h_old"]),
+        assign(v["c1q"], Num(c1) * v["c3q"]),
+        assign(v["c2q"], Num(c2) * v["c3q"]),
+        each(
+            *(assign(avars[j], extrapolated(q)) for j, q in
+              enumerate((v["c1q"], v["c2q"], v["c3q"]))),
+            *(assign(zs[j][i], sel(go, sel(first, 0.0, a[j]), zs[j][i])) for j in range(3)),
+            *(assign(ws[j][i], sel(go, sel(first, 0.0, dot(R.ti[j], a)), ws[j][i]))
+              for j in range(3)),
+            local=("a1", "a2", "a3"),
+        ),
+        assign(outcome, 0),
+        assign(rate, sel(go, fn("pow", fn("max", rate, EPS), ctl.rate_power), rate)),
+        assign(theta, sel(go, ctl.jacobian_reuse, theta)),
+        assign(newt, 0),
+        assign(w["iter"], go),
+        assign(w["done"], False),
+    ]  # fmt: skip
+    k_slow, q, theta_k = 4 + ctl.newton_max - 1, v["q"], v["theta_k"]
+    total, iter_, done, cont = w["total"], w["iter"], w["done"], w["cont"]
+    s1, s2, s3 = Var("s1"), Var("s2"), Var("s3")
+    contraction: list[S] = [
+        assign(v["thq"], dyno / v["dyno_old"]),
+        assign(theta, sel(cmp(newt, "==", 2), v["thq"], fn("sqrt", v["thq"] * v["theta_old"]))),
+        assign(v["theta_old"], v["thq"]),
+        If(not_(cmp(theta, "<", ctl.newton_diverged)), (assign(outcome, 2),)),
+        If(cmp(theta, "<", ctl.newton_diverged), (
+            assign(rate, theta / (Num(1.0) - theta)),
+            assign(theta_k, 1.0),
+            For("j", Int(ctl.newton_max - 1),
+                (assign(theta_k, sel(cmp(Var("j"), ">=", newt), theta_k * theta, theta_k)),)),
+            assign(v["predicted"], rate * dyno * theta_k / v["newton_tol"]),
+            If(cmp(v["predicted"], ">=", 1.0), (
+                assign(q, fn("max", ctl.newton_slow[1],
+                             fn("min", ctl.newton_slow[2], v["predicted"]))),
+                assign(h, h * (Num(ctl.newton_slow[0])
+                               * fn("pow", q, Num(-1.0) / (Int(k_slow) - newt)))),
+                assign(outcome, 1),
+            )),
+        )),
+    ]  # fmt: skip
+    iteration = Loop((
+        assign(iter_, and_(iter_, cmp(outcome, "==", 0), not_(done))),
+        If(not_(iter_), (Break(),)),
+        If(iter_, (
+            each(assign(y[i], x[i] + zs[0][i])),
+            Call("rhs", (at(R.nodes[0]), y, c, k0)),
+            each(assign(y[i], x[i] + zs[1][i])),
+            Call("rhs", (at(R.nodes[1]), y, c, z2s)),
+            each(assign(y[i], x[i] + zs[2][i])),
+            Call("rhs", (t + h, y, c, z3s)),
+            each(
+                assign(avars[0], kk[0, i]), assign(avars[1], z2s[i]), assign(avars[2], z3s[i]),
+                assign(kk[0, i], dot(R.ti[0], a) - g_ * ws[0][i]),
+                assign(z2s[i], dot(R.ti[1], a) - a_ * ws[1][i] + b_ * ws[2][i]),
+                assign(z3s[i], dot(R.ti[2], a) - a_ * ws[2][i] - b_ * ws[1][i]),
+                local=("a1", "a2", "a3"),
+            ),
+            Call("lu_solve", (Int(0),)),
+            Call("lu_solve_complex", ()),
+            assign(total, 0.0),
+            each(
+                assign(s1, kk[0, i] / v["scal"][i]), assign(s2, z2s[i] / v["scal"][i]),
+                assign(s3, z3s[i] / v["scal"][i]),
+                assign(total, total + (s1 * s1 + s2 * s2 + s3 * s3)),
+                local=("s1", "s2", "s3"),
+            ),
+            assign(dyno, fn("sqrt", total / (Int(3) * NX))),
+            driver.count("rhs_calls", 3),
+            inc(newt, 1),
+            assign(bad, not_(fn("finite", dyno))),
+            If(bad, (assign(v["nonfinite"], True), assign(outcome, 2))),
+            If(and_(not_(bad), cmp(newt, ">", 1), cmp(newt, "<", ctl.newton_max)),
+               tuple(contraction)),
+            assign(cont, cmp(outcome, "==", 0)),
+            If(cont, (
+                assign(v["dyno_old"], fn("max", dyno, EPS)),
+                each(
+                    assign(avars[0], ws[0][i] + kk[0, i]), assign(avars[1], ws[1][i] + z2s[i]),
+                    assign(avars[2], ws[2][i] + z3s[i]),
+                    *(assign(ws[j][i], a[j]) for j in range(3)),
+                    *(assign(zs[j][i], dot(R.t[j], a)) for j in range(3)),
+                    local=("a1", "a2", "a3"),
+                ),
+            )),
+            assign(done, and_(cont, not_(cmp(rate * dyno, ">", v["newton_tol"])))),
+            If(and_(cont, not_(done), cmp(newt, ">=", ctl.newton_max)), (assign(outcome, 2),)),
+        ), own=("k", "z2", "z3")),
+    ))  # fmt: skip
+    ok0, norm, again, err = w["ok0"], w["norm"], w["again"], v["err"]
+    eg = w["eg"]
+
+    def rms() -> list[S]:
+        return [
+            assign(total, 0.0),
+            For("i", NE, (assign(total, total + (kk[0, i] / v["scal"][i])
+                                    * (kk[0, i] / v["scal"][i])),), vector=True),
+            assign(norm, fn("sqrt", total / NE)),
+        ]  # fmt: skip
+
+    badf = w["badf"]
+    test: list[S] = [
+        Comment("the error test (radau5's error estimate)"),
+        assign(ok0, and_(go, cmp(outcome, "==", 0))),
+        each(assign(eg[i], dot(R.e, [zs[0][i], zs[1][i], zs[2][i]]) / h),
+             assign(kk[0, i], v["f0"][i] + eg[i])),
+        Call("lu_solve", (Int(0),)),
+        *rms(),
+        assign(again, and_(ok0, cmp(norm, ">=", 1.0), or_(first, v["reject"]))),
+        If(again, (
+            each(assign(y[i], x[i] + kk[0, i])),
+            Call("rhs", (t, y, c, k0)),
+            driver.count("rhs_calls", 1),
+            each(assign(kk[0, i], kk[0, i] + eg[i])),
+            Call("lu_solve", (Int(0),)),
+            *rms(),
+        ), own=("k",)),
+        assign(err, sel(cmp(norm, "<", ctl.err_min), ctl.err_min, norm)),
+        each(assign(dx[i], zs[2][i] - comp[i]), assign(xnew[i], x[i] + dx[i])),
+        assign(w["fin"], and_(ok0, cmp(err, "<", 1.0), not_(last))),
+        assign(badf, False),
+        If(w["fin"], (
+            Call("rhs", (t + h, xnew, c, v["fnew"]), "where the next step starts"),
+            driver.count("rhs_calls", 1),
+            *_any_nonfinite(badf, v["fnew"], NX),
+        )),
+        assign(bad, sel(w["fin"], badf, not_(fn("finite", err)))),
+        *_any_nonfinite(bad, xnew, NX),
+        *([assign(bad, or_(bad, euler_parameters.lost(euler_parameters.norm_of(xnew))))]
+          if quaternion else []),
+        assign(v["nonfinite"], sel(ok0, bad, v["nonfinite"])),
+        assign(outcome, sel(and_(ok0, bad), 2, outcome)),
+    ]  # fmt: skip
+    fail, take, rej, lock, ok = w["fail"], w["take"], w["rej"], w["lock"], w["ok"]
+    quot, h_new, keep, fin = v["quot"], v["h_new"], w["keep"], w["fin"]
+    fac = fn("min", ctl.safety, Num(ctl.safety * (1 + 2 * ctl.newton_max))
+             / (newt + Int(2 * ctl.newton_max)))  # fmt: skip
+    kept = and_(cmp(theta, "<=", ctl.jacobian_reuse), cmp(h_new, ">=", Num(ctl.keep_h[0]) * h),
+                cmp(h_new, "<=", Num(ctl.keep_h[1]) * h))  # fmt: skip
+    kept = and_(kept, not_(driver.reaches_knot())) if knots else kept
+    interpolant: list[S] = [
+        assign(v["h_old"], h),
+        each(
+            assign(v["ak"], (zs[1][i] - zs[0][i]) / Num(c2 - c1)),
+            assign(v["ak1"][i], (zs[2][i] - zs[1][i]) / Num(1.0 - c2)),
+            assign(v["ak2"][i], (v["ak1"][i] - v["ak"]) / Num(1.0 - c1)),
+            assign(v["ak3"][i], v["ak2"][i] - (v["ak"] - zs[0][i] / Num(c1)) / Num(c2)),
+            local=("ak",),
+        ),
+    ]
+    refactor = [assign(v["need_lu"], True), assign(v["need_jac"], not_(v["fresh_jac"]))]
+    control_: list[S] = [
+        Comment("Newton failed or too slow, or a NaN or Inf: rejected"),
+        assign(fail, and_(go, cmp(outcome, "!=", 0))),
+        *rejected(fail),
+        assign(h, sel(and_(fail, cmp(outcome, "==", 2)), h * Num(ctl.newton_shrink), h)),
+        If(fail, tuple(refactor)),
+        assign(go, and_(go, not_(fail))),
+        assign(quot, control.quotient(err, fac), "h_new = h / quot"),
+        assign(h_new, h / quot),
+        assign(take, and_(go, cmp(err, "<", 1.0))),
+        assign(rej, and_(go, not_(cmp(err, "<", 1.0)))),
+        assign(lock, Bool(False) if quaternion else locked(x, xnew)),
+        assign(ok, and_(take, not_(lock))),
+        assign(first, sel(ok, False, first)),
+        *control.predictive_selected(ok, quot, err),
+        assign(h_new, h / quot),
+        If(ok, tuple(interpolant)),
+        *(driver.passed(ok, collocation(R), sel(last, t1, t + h), t, h, row) if grid else []),
+        If(ok, tuple(accepted(quaternion))),
+        *driver.counted(ok, rej, last),
+        *(driver.reached(row, ok) if grid else []),
+        assign(cd, driver.ended(and_(take, lock), ok, last, cd)),
+        Comment("after an accepted step that is not the last: the next h, J and factors"),
+        assign(cont, and_(ok, not_(last))),
+        If(cont, (each(assign(v["f0"][i], v["fnew"][i])), assign(v["fresh_jac"], False))),
+        assign(h_new, fn("min", h_new, w["span"])),
+        assign(h_new, sel(v["reject"], fn("min", h_new, h), h_new)),
+        assign(v["reject"], sel(cont, False, v["reject"])),
+        *driver.next_knot(knots),
+        assign(fin, driver.final_step(knots, h_new)),
+        assign(keep, and_(not_(fin), kept)),
+        assign(h, sel(cont, sel(fin, t1 - t, sel(keep, h, h_new)), h)),
+        assign(last, sel(and_(cont, fin), True, last)),
+        *driver.knot_clip(knots, last, and_(cont, not_(fin))),
+        assign(v["need_jac"], sel(and_(cont, not_(keep)), cmp(theta, ">", ctl.jacobian_reuse),
+                                  v["need_jac"])),
+        assign(v["need_lu"], sel(and_(cont, not_(keep)), True, v["need_lu"])),
+        Comment("a rejected step"),
+        assign(v["reject"], sel(rej, True, v["reject"])),
+        assign(last, sel(rej, False, last)),
+        assign(h, sel(rej, sel(first, h * Num(ctl.first_reject), h_new), h)),
+        If(rej, tuple(refactor)),
+    ]  # fmt: skip
+    body = (*start, *jacobian, *factors, *begin_newton, iteration, *test, *control_)
+    zero = Num(0.0)
+    tolerances = (
+        Decl("rtol_e", "double"), Decl("atol_e", "double"), Decl("newton_tol", "double"),
+    )  # fmt: skip
+    head = (
+        assign(v["rtol_e"], Num(ctl.tol_factor) * fn("pow", Var("rtol"), ctl.tol_power)),
+        assign(v["atol_e"], v["rtol_e"] * (Var("atol") / Var("rtol"))),
+        assign(v["newton_tol"], fn("max", Num(ctl.newton_tol[0]) * EPS / v["rtol_e"],
+                                   fn("min", ctl.newton_tol[1], fn("sqrt", v["rtol_e"])))),
+    )  # fmt: skip
+    body = (*head, *body)
+    locals_ = (
+        *tolerances,
+        *(Decl(n, "bool", (), "inout", zero) for n in STEP_BOOLS),
+        *(Decl(n, "double", (), "inout", zero) for n in STEP_REALS),
+        *(Decl(n, "int", (), "inout", zero) for n in ("newt", "outcome")),
+        *driver.knot_locals(knots),
+        *(scalar("norm", "inout") for _ in range(int(quaternion))),
+        Decl("stored", "int", (len(stored),), values=stored),
+    )
+    if grid:
+        locals_ += driver.lane_grid_locals(body)
+        doc = (f"One turn of {m.name}_grid's loop on every lane.",)
+        return Func(f"{m.name}_grid_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
+    doc = (f"One turn of {m.name}_integrate's loop on every lane.",)
+    return Func(f"{m.name}_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
+
+
+def lane_state(m: Method) -> list[Decl]:
+    """What struct lanes holds for m per lane, beyond a pair's."""
+    square = [matrix(n, "inout") for n in ("J", "jn", "e1", "e2rk", "e2ik")]
+    square += [*linear.lanes_state(), *linear.lanes_state_complex()]
+    square += [pivots("piv1", "inout"), pivots("piv2k", "inout")]
+    rows = [arr(n, "inout") for n in LANE_ROWS]
+    values = [Decl(n, "bool", (), "inout") for n in LANE_BOOLS]
+    values += [scalar(n, "inout") for n in LANE_REALS] + [Decl("singular", "int", (), "inout")]
+    stats = [Decl(f"stats.{n}", "long", (), "inout") for n in ("jac_calls", "decompositions")]
+    return [*square, *rows, *values, *stats, Decl("k", "double", (1, "NX"), "inout")]
+
+
+def lane_start(m: Method) -> list[S]:
+    """A lane's values at t0 beyond common.start_state (m.name_integrate's
+    start; its last step from t0 is the first turn's, begun)."""
+    ctl = m.control
+    assert isinstance(ctl, RadauControl)
+    v = V
+    return [
+        *(assign(v[n], 1.0) for n in ("h_old", "rate", "theta_old", "dyno_old")),
+        *driver.Gustafsson(ctl).start(),
+        *(assign(v[n], val) for n, val in (("first", True), ("reject", False),
+          ("fresh_jac", False), ("need_jac", True), ("need_lu", True))),
+        assign(L["begun"], False),
+        assign(L["ending"], False),
+        assign(v["singular"], 0),
+        assign(L["span"], Var("t1") - Var("t0")),
+        each(assign(v["ak1"][i], 0.0), assign(v["ak2"][i], 0.0), assign(v["ak3"][i], 0.0)),
+    ]  # fmt: skip
+
+
+__all__ = ["integrate", "lane_start", "lane_state", "lanes_step"]

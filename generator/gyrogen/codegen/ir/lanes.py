@@ -423,7 +423,8 @@ def converted(
         elif isinstance(s, Assign) and cond is not None:
             out.append(Assign(s.target, Sel(cond, s.value, s.target), s.note))
         elif isinstance(s, For) and cond is not None:
-            body = tuple(converted(s.body, cond, own=own, scratch=scratch))
+            scoped = own | frozenset(s.locals)  # a loop's scoped values are its own
+            body = tuple(converted(s.body, cond, own=scoped, scratch=scratch))
             out.append(For(s.var, s.n, body, s.locals, s.type, s.start))
         else:
             out.append(s)
