@@ -6,7 +6,7 @@ templates read it: a method is added here, once.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -213,9 +213,20 @@ class Method:
 
     @property
     def lanes(self) -> bool:
-        """Its batch runs trajectories in SIMD lanes (an explicit pair,
+        """Its batch can run trajectories in SIMD lanes (an explicit pair,
         Taylor, a Rosenbrock method, Radau IIA)."""
         return self.pair or self.taylor or self.rosenbrock or self.radau
+
+    @property
+    def lanes_asked(self) -> bool:
+        """Its lanes are generated only for a scene that lists it under
+        `lanes` (Radau IIA: they make the scene's C build slower and struct
+        lanes larger); elsewhere its batch is a loop of single calls."""
+        return self.radau
+
+    def laned(self, asked: Collection[str]) -> bool:
+        """Its batch runs in SIMD lanes in a scene whose `lanes` lists asked."""
+        return self.lanes and (not self.lanes_asked or self.name in asked)
 
     @property
     def start_order(self) -> int:

@@ -168,6 +168,7 @@ class SceneContext:
                 "name": f"{self.scene.name}_var",
                 "outputs": Outputs(),
                 "integrators": kept,
+                "lanes": [m for m in self.scene.lanes if m in kept],
                 "sensitivities": None,
             }
         )
@@ -188,6 +189,12 @@ class SceneContext:
     def methods(self) -> list[Method]:
         """The scene's integrators, from the registry (gyrogen.methods)."""
         return [METHODS[m] for m in self.scene.integrators]
+
+    @property
+    def laned(self) -> list[Method]:
+        """The integrators whose C batches run over SIMD lanes (radau5's
+        only where the scene's `lanes` asks for them)."""
+        return [m for m in self.methods if m.laned(self.scene.lanes)]
 
     @property
     def outputs(self) -> list[Output]:
@@ -216,6 +223,7 @@ class SceneContext:
             self.measured,
             self.kinds,
             self.scene.table_times,
+            self.scene.lanes,
         )
 
     @property

@@ -164,6 +164,12 @@ class Scene(_Strict):
     integrators: list[str] = Field(default_factory=lambda: list(methods.NAMES))
     """Compiled integrators to render beside the RHS (gyrogen.methods; an
     implicit one adds the Jacobian)."""
+    lanes: list[str] = Field(default_factory=list)
+    """Integrators whose C `_batch` and `_grid_batch` run over SIMD lanes
+    only when listed here: radau5 (its lanes make the scene's C build
+    slower and struct lanes larger). Not listed, its batches are a loop of
+    its single calls. The explicit pairs, taylor and rodas4 always run over
+    lanes."""
     attitude: Literal["euler312", "quaternion"] = "euler312"
     """3-1-2 Euler angles q1..q3 (singular at q2 = +-pi/2), or Euler parameters
     e0..e3 (no singularity; the integrators keep |e| = 1 by projection)."""
@@ -192,6 +198,8 @@ class Scene(_Strict):
             data.pop("events", None)  # the dump before events
         if self.sensitivities is None:
             data.pop("sensitivities", None)  # the dump before sensitivities
+        if not self.lanes:
+            data.pop("lanes", None)  # the dump before lanes were asked for
         if isinstance(data.get("outputs"), dict) and not self.outputs.linear_model:
             data["outputs"].pop("linear_model", None)  # the dump before linear models
         if not self.rotors:
@@ -228,8 +236,28 @@ class Scene(_Strict):
             raise ValueError("list each integrator once")
         return v
 
+    @field_validator("lanes")
+    @classmethod
+    def _lanes(cls, v: list[str]) -> list[str]:
+        asked = [n for n, m in methods.METHODS.items() if m.lanes_asked]
+        for i, name in enumerate(v):
+            if name not in methods.NAMES:
+                raise ValueError(f"[{i}] {name!r}: not one of {', '.join(methods.NAMES)}")
+            m = methods.get(name)
+            if not m.lanes_asked:
+                how = "always runs over lanes" if m.lanes else "has no lanes"
+                raise ValueError(
+                    f"[{i}] {name!r}: its batch {how}; only {', '.join(asked)} can be listed"
+                )
+        if len(set(v)) != len(v):
+            raise ValueError("list each integrator once")
+        return v
+
     @model_validator(mode="after")
     def _consistent(self) -> Scene:
+        absent = [m for m in self.lanes if m not in self.integrators]
+        if absent:
+            raise ValueError(f"lanes: {absent[0]} is not among this scene's integrators")
         if "rotors" in self.model_fields_set and not self.rotors:
             raise ValueError(
                 "rotors: empty: a cluster needs at least one [[rotors]] table "

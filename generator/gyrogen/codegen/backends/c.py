@@ -33,14 +33,14 @@ def files(unit: SceneContext) -> dict[str, str]:
     ]
     model = [f for f in source if f is not None]
     jac = statements.jacobian(unit)
-    stepped = [m for m in unit.methods if m.lanes and not m.taylor]  # on the rhs over lanes
+    stepped = [m for m in unit.laned if not m.taylor]  # on the rhs over lanes
     lanes_ode = statements.rhs_lanes_ode(unit) if stepped else None
     jac_lanes = statements.jacobian_lanes(unit) if any(m.implicit for m in stepped) else None
     # the Taylor jet calls the rhs's sin and cos, scalar and over lanes
     rhs_trig = statements.trig_used([rhs])
     expanded = [*rhs_trig, *(v + "_lanes" for v in rhs_trig)] if unit.jet is not None else []
     ode_trig = statements.trig_used([jac, lanes_ode, jac_lanes]) + expanded
-    gimbal_checks = ["cos", "cos_lanes"] if any(m.lanes for m in unit.methods) else ["cos"]
+    gimbal_checks = ["cos", "cos_lanes"] if unit.laned else ["cos"]
     if not unit.quaternion:  # the gimbal-lock checks
         ode_trig += gimbal_checks
     ode_model = [f for f in (jac, lanes_ode, jac_lanes) if f is not None]

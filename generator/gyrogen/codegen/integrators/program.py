@@ -7,7 +7,7 @@ The templates only place these texts and the public wrappers.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field, replace
 
 from gyrogen.abi_groups import StateKind
@@ -51,6 +51,8 @@ class Given:
     """The Jacobian's diagonal blocks (the implicit methods' LU)."""
     knots: driver.Knots = ()
     """The scene's table times, which no adaptive step crosses."""
+    asked: frozenset[str] = frozenset()
+    """The methods whose lanes the scene asks for (its `lanes`, Method.laned)."""
 
 
 @dataclass(frozen=True)
@@ -111,15 +113,18 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
 
 def _radau(m: Method, g: Given) -> Parts:
     assert g.blocks is not None, "an implicit method needs the Jacobian's blocks"
+    single = [
+        radau.factor(m),
+        radau.newton(m),
+        radau.error(m),
+        radau_step.integrate(m, g.quaternion, knots=g.knots),
+        radau_step.integrate(m, g.quaternion, True, g.knots),
+        *([radau_step.integrate(m, g.quaternion, g.events, g.knots)] if g.events else []),
+    ]
+    if not m.laned(g.asked):  # its batches: a loop of single calls
+        return Parts(single)
     return Parts(
-        [
-            radau.factor(m),
-            radau.newton(m),
-            radau.error(m),
-            radau_step.integrate(m, g.quaternion, knots=g.knots),
-            radau_step.integrate(m, g.quaternion, True, g.knots),
-            *([radau_step.integrate(m, g.quaternion, g.events, g.knots)] if g.events else []),
-        ],
+        single,
         [
             radau_step.lanes_step(m, g.quaternion, g.blocks, knots=g.knots),
             radau_step.lanes_step(m, g.quaternion, g.blocks, True, g.knots),
@@ -179,15 +184,18 @@ def program(
     measured: int | None = None,
     kinds: Sequence[StateKind] = (),
     knots: driver.Knots = (),
+    asked: Collection[str] = (),
 ) -> Program:
     """The methods' functions, the lanes' and the shared ones they call;
     measured: how many leading states the error norms measure (all: None);
     kinds: each state's (abi_groups.state_kind), the error scales' caps
     (common.angle_table, declared by each function that reads it); knots:
-    the scene's table times, which no adaptive step crosses (driver.Knots)."""
+    the scene's table times, which no adaptive step crosses (driver.Knots);
+    asked: the methods whose lanes the scene asks for (its `lanes`: radau5's
+    are generated only then, Method.laned)."""
     pairs = [m for m in methods if m.pair]
     krows = explicit.rows(pairs) if pairs else 0
-    given = Given(quaternion, uses_time, krows, jet, events, blocks, knots)
+    given = Given(quaternion, uses_time, krows, jet, events, blocks, knots, frozenset(asked))
     parts = [DESCRIPTIONS[m.kind](m, given) for m in methods]
     single = [f for p in parts for f in p.single]
     lanes = [f for p in parts for f in p.lanes]
