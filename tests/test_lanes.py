@@ -15,10 +15,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sources import write_sources
 
 from gyrogen import abi
 from gyrogen.runtime import flags
 from gyrogen.runtime.compiled import Compiled
+from gyrogen.scene import builtin_text, load_toml, validate
 
 pytestmark = pytest.mark.slow  # the lane-batched integrators of several scenes, compiled and run
 
@@ -30,6 +32,14 @@ NAN_TRAJ, LOCKED_TRAJ = 3, 5
 NONFINITE, MAX_STEPS, ATTITUDE = 3, 2, 6
 FAST = [f for f in (*flags.FAST, flags.OPENMP) if flags.accepts("gcc", "c", f)]
 """A local build's optional flags at users' level (-O3, whatever the suite builds at)."""
+
+
+@pytest.fixture(scope="module")
+def laned_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default scene with radau5's lanes asked for (`lanes = ["radau5"]`)."""
+    data = load_toml(builtin_text("gyrostat"), "gyrostat")
+    scene = validate({**data, "lanes": ["radau5"]}, "gyrostat, radau5 over lanes")
+    return write_sources(scene, tmp_path_factory.mktemp("laned") / "gyrostat")
 
 
 def _build(source_dir: Path, out: Path, lanes: int, extra: list[str]) -> Path:
@@ -64,13 +74,18 @@ def _codes(block: bytes, which: int) -> np.ndarray:
     return np.frombuffer(part[-N * 4 :], dtype=np.int32)
 
 
+@pytest.mark.parametrize("sources", ["default", "radau5 laned"])
 @pytest.mark.parametrize("build", ["fast", "portable"])
 def test_results_do_not_depend_on_lanes_or_threads(
-    source_dir: Path, tmp_path: Path, build: str
+    request: pytest.FixtureRequest, tmp_path: Path, build: str, sources: str
 ) -> None:
     """One build's flags (this machine's fast ones with OpenMP, or plain
     -O2): lane widths 1, 4 and 8, one and two threads, every batch equal to
-    the single-trajectory calls, bit for bit; stats and codes included."""
+    the single-trajectory calls, bit for bit; stats and codes included. The
+    default scene's sources (radau5's batch: a loop of its calls) and those
+    that ask for radau5's lanes (its batch over lanes, struct lanes on the
+    heap)."""
+    source_dir = request.getfixturevalue("source_dir" if sources == "default" else "laned_dir")
     extra = FAST if build == "fast" else ["-O2"]
     runs = []
     for lanes in (1, 4, 8):
@@ -93,6 +108,21 @@ def test_results_do_not_depend_on_lanes_or_threads(
     # lanes that reject steps and take Newton iterations of their own number
     assert np.count_nonzero(_stats(batch, 6, "rejected")) > 0
     assert len(set(_stats(batch, 6, "rhs_calls") - 2 * _stats(batch, 6, "accepted"))) > 2
+
+
+def test_radau5_lanes_only_where_asked_for(source_dir: Path, laned_dir: Path) -> None:
+    """Without `lanes`, radau5 has no lanes code (its batches: a loop of
+    its single calls) and struct lanes lives on pair_lanes's stack as
+    before; asked for, radau5's steps over lanes are there and struct
+    lanes is on the heap, one per thread."""
+    plain = (source_dir / "gyrostat_ode.c").read_text()
+    laned = (laned_dir / "gyrostat_ode.c").read_text()
+    for name in ("radau5_step_lanes", "radau5_grid_step_lanes", "lu_decompose_complex_lanes"):
+        assert name not in plain and name in laned, name
+    assert "    struct lanes L;\n" in plain and "malloc(" not in plain
+    assert "    struct lanes L;\n" not in laned and "malloc(threads * sizeof(struct lanes)" in laned
+    batch = laned[laned.index("size_t gyrostat_radau5_batch(") :]
+    assert "pair_batch(radau5_step_lanes," in batch[: batch.index("\n}\n")]
 
 
 def test_batch_agrees_with_single_through_python(backends: dict[str, Compiled]) -> None:

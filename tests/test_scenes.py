@@ -43,6 +43,10 @@ def simulating(line: str) -> str:
     return edit("[simulate]", f"[simulate]\n{line}")
 
 
+def laned(value: str) -> str:
+    return edit("[parameters]", f"lanes = {value}\n\n[parameters]")
+
+
 FOLDED_SINGULAR = edit("I11 = ", "I11 = 1e-15 #")
 for _old, _new in [
     ("I22 = 25.0", "I22 = 1e-15"), ("I33 = 18.0", "I33 = 1e-15"), ("I13 = 0.5", "I13 = 0.0"),
@@ -169,6 +173,16 @@ BAD = [
         "description: bidirectional control U+202E",
     ),
     ("description isolate", described("ok \\u2066x"), "description: bidirectional control U+2066"),
+    ("lanes always", laned('["dop853"]'), "lanes: [0] 'dop853': its batch always runs over lanes"),
+    ("lanes none", laned('["rk4"]'), "lanes: [0] 'rk4': its batch has no lanes; only radau5 can"),
+    ("lanes unknown", laned('["radau6"]'), "lanes: [0] 'radau6': not one of rk4, dopri5"),
+    ("lanes twice", laned('["radau5", "radau5"]'), "lanes: list each integrator once"),
+    ("lanes not a list", laned('"radau5"'), "lanes: Input should be a valid list"),
+    (
+        "lanes not integrated",
+        laned('["radau5"]\nintegrators = ["dop853"]'),
+        "lanes: radau5 is not among this scene's integrators",
+    ),
 ]
 
 
@@ -184,6 +198,14 @@ def test_bad_scene_is_one_line_exit_2_nothing_written(
     assert err.count("\n") == 1 and err.startswith(f"gyrogen: error: {path}: ")
     assert message in err, err
     assert not out.exists() and stdout == ""
+
+
+def test_lanes_asked_for_are_kept_and_none_leave_the_dump_as_before() -> None:
+    """radau5's lanes asked for: in the scene and its dump (its build id);
+    not asked for: no `lanes` key in the dump, the build id of before."""
+    scene = parse(laned('["radau5"]'), "laned")
+    assert scene.lanes == ["radau5"] and scene.model_dump()["lanes"] == ["radau5"]
+    assert "lanes" not in parse(GOOD, "plain").model_dump()
 
 
 def test_a_start_angle_at_the_bound_is_accepted() -> None:

@@ -58,6 +58,8 @@ def files(unit: SceneContext) -> dict[str, str]:
         ),
         "ode_trig": trig_text("c", unit.prefix, unit.macro, [v for v in VARIANTS if v in ode_trig]),
         "methods": unit.methods,
+        # struct lanes on the heap where lanes were asked for (they make it large)
+        "lanes_heap": any(m.lanes_asked for m in unit.laned),
         "ir": c_text(
             unit.program,
             unit.prefix,
