@@ -7,9 +7,10 @@ states, on one core, on the default scene and on stiff_wheel.
         [--grid]
 
 Each scene is built with every method it offers (its `integrators` key left
-out) and this machine's flags. N start states: the scene's start with its
-carrier rates (u1..u3, or the scene's first three rates) scaled by uniform
-factors in [0.9, 1.1]. Each method integrates them from 0 to F t_end at
+out), the lanes of those whose lanes are generated only when asked for
+(radau5: scene key `lanes`), and this machine's flags. N start states: the
+scene's start with its carrier rates (u1..u3, or the scene's first three
+rates) scaled by uniform factors in [0.9, 1.1]. Each method integrates them from 0 to F t_end at
 each tolerance (rtol = atol): `<method>_batch` with one thread
 (Compiled.integrate_batch, threads=1) and `gyrogen_each` (the cffi glue's
 loop of `<method>` calls, one state after another); with --grid also
@@ -26,7 +27,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 import time
 from collections.abc import Callable
 from typing import Any
@@ -39,7 +39,7 @@ from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import compiled, scene_sources
-from gyrogen.scene import builtin_text, default, parse
+from gyrogen.scene import builtin_text, default, load_toml, validate
 
 MAX_STEPS = 1_000_000
 GRID = 101
@@ -127,8 +127,10 @@ def main() -> None:
     print(f"{'scene':<12} {'method':<12} {'tol':>6} {'steps':>8} {'lanes us':>10} "
           f"{'loop us':>10} {'loop/lanes':>10}")  # fmt: skip
     for name in args.scenes.split(","):
-        text = re.sub(r"(?m)^integrators\s*=.*\n", "", builtin_text(name))
-        scene = parse(text, f"{name} (built-in)")
+        data = load_toml(builtin_text(name), name)
+        data.pop("integrators", None)
+        data["lanes"] = [n for n, m in methods.METHODS.items() if m.lanes_asked]
+        scene = validate(data, f"{name} (built-in)")
         comp = compiled(scene_sources(scene))
         c = comp.setup(runtime_values(scene))
         x0s = starts(comp, np.array(scene.initial_state()), args.n)

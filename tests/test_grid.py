@@ -200,7 +200,8 @@ def test_a_negative_count_is_a_code(
     assert code == ERR_GRID
 
 
-LANED = [name for name, m in methods.METHODS.items() if m.lanes]
+LANED = [name for name, m in methods.METHODS.items() if m.laned(default().lanes)]
+"""The methods whose _grid_batch runs over lanes in the default scene."""
 
 
 @pytest.mark.parametrize("method", LANED)

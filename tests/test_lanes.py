@@ -20,7 +20,8 @@ from sources import write_sources
 from gyrogen import abi
 from gyrogen.runtime import flags
 from gyrogen.runtime.compiled import Compiled
-from gyrogen.scene import builtin_text, load_toml, validate
+from gyrogen.runtime.scene_build import build_scene
+from gyrogen.scene import Scene, builtin_text, load_toml, validate
 
 pytestmark = pytest.mark.slow  # the lane-batched integrators of several scenes, compiled and run
 
@@ -34,12 +35,27 @@ FAST = [f for f in (*flags.FAST, flags.OPENMP) if flags.accepts("gcc", "c", f)]
 """A local build's optional flags at users' level (-O3, whatever the suite builds at)."""
 
 
-@pytest.fixture(scope="module")
-def laned_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def _laned() -> Scene:
     """The default scene with radau5's lanes asked for (`lanes = ["radau5"]`)."""
     data = load_toml(builtin_text("gyrostat"), "gyrostat")
-    scene = validate({**data, "lanes": ["radau5"]}, "gyrostat, radau5 over lanes")
-    return write_sources(scene, tmp_path_factory.mktemp("laned") / "gyrostat")
+    return validate({**data, "lanes": ["radau5"]}, "gyrostat, radau5 over lanes")
+
+
+@pytest.fixture(scope="module")
+def laned_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_sources(_laned(), tmp_path_factory.mktemp("laned") / "gyrostat")
+
+
+@pytest.fixture(scope="module")
+def laned_backend(tmp_path_factory: pytest.TempPathFactory, cache_dir: Path) -> Compiled:
+    """_laned() compiled at users' level (-O3), in the run's build cache."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("GYROGEN_CACHE", str(cache_dir))
+    mp.setenv(flags.OPT_LEVEL, "3")
+    try:
+        return build_scene(_laned(), tmp_path_factory.mktemp("laned-c") / "gyrostat", ["c"])["c"]
+    finally:
+        mp.undo()
 
 
 def _build(source_dir: Path, out: Path, lanes: int, extra: list[str]) -> Path:
@@ -123,6 +139,34 @@ def test_radau5_lanes_only_where_asked_for(source_dir: Path, laned_dir: Path) ->
     assert "    struct lanes L;\n" not in laned and "malloc(threads * sizeof(struct lanes)" in laned
     batch = laned[laned.index("size_t gyrostat_radau5_batch(") :]
     assert "pair_batch(radau5_step_lanes," in batch[: batch.index("\n}\n")]
+
+
+def test_radau5_batches_over_lanes_equal_its_single_calls(laned_backend: Compiled) -> None:
+    """radau5's lanes asked for: _batch and _grid_batch over 21 states
+    (rates over a factor of 30, one not finite, a step budget some run
+    out of), on one thread and on two, each state's end (rows), stats and
+    code its single call's bit for bit."""
+    b = laned_backend
+    p = np.array([100, 5, 12, 9, 15, 0.8, 0.02, 0.03, 0.2, -0.1, 9.81, 0.01])
+    c = b.setup(p)
+    x0 = np.zeros(NX)
+    x0[[1, 7, 8, 9, 10, 11]] = 0.1, 0.2, 1.0, -0.1, 50.0, 1.0
+    x0s = np.tile(x0, (21, 1))
+    x0s[:, 7:10] *= np.random.default_rng(5).uniform(0.3, 10.0, (21, 1))
+    x0s[4, 0] = np.nan
+    times = np.linspace(0.0, 2.0, 9)
+    kw = {"rtol": 1e-8, "atol": 1e-8, "max_steps": 40}
+    for threads in (1, 2):
+        xs, stats, codes = b.integrate_batch("radau5", x0s, c, 0.0, 2.0, threads, **kw)
+        rows, gstats, gcodes = b.integrate_grid_batch("radau5", x0s, c, times, threads, **kw)
+        assert set(codes) == {0, MAX_STEPS, NONFINITE}, codes
+        for k, start in enumerate(x0s):
+            x, st, code = b.integrate("radau5", start, c, 0.0, 2.0, **kw)
+            assert code == codes[k] and np.array_equal(x, xs[k], equal_nan=True), k
+            assert all(np.array_equal(v, stats[f][k], equal_nan=True) for f, v in st.items()), k
+            one, gst, gcode = b.integrate_grid("radau5", start, c, times, **kw)
+            assert gcode == gcodes[k] and np.array_equal(one, rows[k], equal_nan=True), k
+            assert all(np.array_equal(v, gstats[f][k], equal_nan=True) for f, v in gst.items()), k
 
 
 def test_batch_agrees_with_single_through_python(backends: dict[str, Compiled]) -> None:
