@@ -263,7 +263,8 @@ def methods_table() -> str:
             "fixed step" if m.fixed_step else "implicit, adaptive" if m.implicit else
             "explicit, adaptive"
         )  # fmt: skip
-        rows.append(f"| `{m.name}` | {_escape(m.doc)} | {kind} | {'yes' if m.lanes else 'no'} |")
+        lanes = "where the scene asks (`lanes`)" if m.lanes_asked else "yes" if m.lanes else "no"
+        rows.append(f"| `{m.name}` | {_escape(m.doc)} | {kind} | {lanes} |")
     rows += ["", f"Stiff problems, best first: {', '.join(STIFF_CHOICE)}. "
              f"Other problems, best first: {', '.join(EXPLICIT_CHOICE)}."]  # fmt: skip
     return "\n".join(rows)
