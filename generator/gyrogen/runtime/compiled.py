@@ -667,8 +667,9 @@ class Compiled:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Integrate many states with one set of constants.
 
-        The explicit pairs, the Taylor method and rodas4 run the states in
-        SIMD lanes, each equal bit for bit to `integrate`'s result. A build with
+        The explicit pairs, the Taylor method, rodas4 and radau5 where the
+        scene asks (its `lanes`) run the states in SIMD lanes, each equal
+        bit for bit to `integrate`'s result. A build with
         OpenMP splits the batch over the cores in C, one without it in
         slices called from Python threads (cffi releases the GIL); the
         results do not depend on the thread count.
@@ -819,7 +820,8 @@ class Compiled:
         **kwargs: Any,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """`integrate_var` for many states with one set of constants, as
-        `integrate_batch` (SIMD lanes for the pairs, the Taylor method and rodas4).
+        `integrate_batch` (SIMD lanes for the pairs, the Taylor method, rodas4
+        and an asked-for radau5).
 
         Returns
         -------
