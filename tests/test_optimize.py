@@ -215,3 +215,16 @@ def test_jacobian_entries_are_sympys(name: str) -> None:
     for fi in f:
         for xj in eqs.states:
             assert _same(d.of(fi, xj), sm.diff(fi, xj))
+
+
+def test_horner_forms_are_sympys_in_every_order() -> None:
+    """hoist._horner, its inner forms shared between orders, gives the
+    expression sm.horner gives for each order of the variables."""
+    import itertools
+
+    x, y, z = sm.symbols("x y z", real=True)
+    c = sm.symbols("c0:6", real=True)
+    poly = c[0] * x**2 * y + c[1] * x * y * z - c[2] * y**2 * z + c[3] * x + c[4] * z**3 + c[5]
+    done: dict = {}
+    for order in itertools.permutations((x, y, z)):
+        assert _same(hoist._horner(poly, order, done), sm.horner(poly, *order))

@@ -34,13 +34,16 @@ is the solved u'.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import operator
 from typing import Any
 
 import sympy as sm
 import sympy.physics.mechanics as me
 from sympy.polys.domains import QQ
 from sympy.polys.orderings import lex
-from sympy.polys.rings import PolyElement, ring
+from sympy.polys.polyerrors import CoercionFailed
+from sympy.polys.rings import PolyElement, PolyRing, ring
 
 from gyrogen.abi_rotors import (
     AXIS,
@@ -395,14 +398,43 @@ def _on_circles(e: sm.Expr, rel: Relations) -> PolyElement:
     others = sorted(e.free_symbols - set(rel.variables), key=str)
     try:  # a polynomial in every symbol
         r, *_ = ring([*rel.variables, *others], field, lex)
-        p = r.from_expr(e)
+        p = _polynomial(e, r)
     except ValueError:  # a runtime mass in a denominator: its rational functions as coefficients
         domain = field.frac_field(*others) if others else field
         r, *_ = ring(list(rel.variables), domain, lex)
-        p = r.from_expr(e)
+        p = _polynomial(e, r)
     for start, stop, basis in rel.blocks:
         p = _reduced(p, [r.from_expr(x) for x in basis], start, stop)
     return p
+
+
+def _polynomial(e: sm.Expr, r: PolyRing) -> PolyElement:
+    """r.from_expr(e) by its steps, each distinct subexpression converted
+    once: Kane's forcing repeats its subexpressions many times over (its
+    tree is ~20,000 operations, its polynomial ~240 terms)."""
+    gens = dict(zip(r.symbols, r.gens, strict=True))
+    done: dict[sm.Expr, PolyElement] = {}
+
+    def walk(x: sm.Expr) -> PolyElement:
+        got = gens.get(x, done.get(x))
+        if got is None:
+            if x.is_Add:
+                got = functools.reduce(operator.add, [walk(a) for a in x.args])
+            elif x.is_Mul:
+                got = functools.reduce(operator.mul, [walk(a) for a in x.args])
+            else:
+                base, exp = x.as_base_exp()
+                if exp.is_Integer and exp > 1:
+                    got = walk(base) ** int(exp)
+                else:
+                    got = r.ground_new(r.domain.convert(x))
+            done[x] = got
+        return got
+
+    try:
+        return r.ring_new(walk(sm.sympify(e)))
+    except CoercionFailed as exc:
+        raise ValueError(f"not a polynomial in {r}: {e}") from exc
 
 
 def _reduced(p: PolyElement, basis: list[PolyElement], start: int, stop: int) -> PolyElement:
