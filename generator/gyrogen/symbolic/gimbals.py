@@ -187,17 +187,28 @@ def kane(carrier: sm.Matrix, units: list[Unit]) -> tuple[sm.Matrix, sm.Matrix, s
             on_a -= net * g
             continue
         i = gim.index(x)
-        g_s, g_t = (vec(v) for v in x.frames(sm.cos(gam[i]), sm.sin(gam[i])))
-        g_g = vec(x.g_g)
+        axes = x.frames(sm.cos(gam[i]), sm.sin(gam[i]))
+        g_s, g_t, g_g = vec(axes[0]), vec(axes[1]), vec(x.g_g)
         ug = sm.Symbol(f"ug{x.k}", real=True)
-        G = me.ReferenceFrame(f"G{x.k}")
+        folded = x.axis[0].is_number and x.g_g[0].is_number
+        if folded:
+            # G oriented from A, its axes (g_s, g_t, g_g): each inertia is
+            # constant in them (no time derivative of its components in A's)
+            G = A.orientnew(f"G{x.k}", "DCM", sm.Matrix.hstack(*axes, x.g_g))
+            G.set_ang_vel(A, gam[i].diff(t) * g_g)
+            e_s, e_t, e_g = G.x, G.y, G.z
+        else:  # runtime axes, orthonormal modulo the proof's relations: in A's
+            G = me.ReferenceFrame(f"G{x.k}")
+            e_s, e_t, e_g = g_s, g_t, g_g
         w_G = omega + (nu[i] - g_g.dot(omega)) * g_g
         G.set_ang_vel(N, w_G)
         W = me.ReferenceFrame(f"W{x.k}")
         W.set_ang_vel(N, w_G + (w[j] - g_s.dot(w_G)) * g_s)
+        if folded:
+            W.set_ang_vel(G, (w[j] - g_s.dot(w_G)) * e_s)
         igs, igt, igg = x.inertia
-        frame = igs * (g_s | g_s) + igt * (g_t | g_t) + igg * (g_g | g_g)
-        wheel = x.I * ((g_t | g_t) + (g_g | g_g)) + x.J * (g_s | g_s)
+        frame = igs * (e_s | e_s) + igt * (e_t | e_t) + igg * (e_g | e_g)
+        wheel = x.I * ((e_t | e_t) + (e_g | e_g)) + x.J * (e_s | e_s)
         bodies += [me.RigidBody(f"G{x.k}", C, G, 0, (frame, C)),
                    me.RigidBody(f"W{x.k}", C, W, 0, (wheel, C))]  # fmt: skip
         loads += [(W, net * g_s), (G, ug * g_g - net * g_s)]
