@@ -157,10 +157,10 @@ def test_a_held_gimbal_is_a_fixed_wheel() -> None:
         center = (v.mg[:, None] * v.r).sum(0) / mass  # the carrier with its frames
         carrier = v.carrier + gr._point(v.m_a, -center)
         for k in range(n):
-            rot = np.column_stack([f.g_s[s, k], f.g_t[s, k], f.g_g[s, k]])
+            rot = np.column_stack([f.g_s[:, k, s], f.g_t[:, k, s], f.g_g[:, k, s]])
             carrier += rot @ v.IG[k] @ rot.T + gr._point(v.mg[k], v.r[k] - center)
         wheels = [
-            {"m": v.m[k], "I": v.I[k], "J": v.J[k], "g": f.g_s[s, k], "r": v.r[k] - center,
+            {"m": v.m[k], "I": v.I[k], "J": v.J[k], "g": f.g_s[:, k, s], "r": v.r[k] - center,
              "b": v.b[k]} for k in range(n)
         ]  # fmt: skip
         scene = parse(cluster_scene(carrier, mass, wheels), "ref")

@@ -378,3 +378,22 @@ def test_the_header_says_a_gimbals_spin_axis_is_the_one_at_gimbal_angle_0() -> N
     assert (
         fixed.unit_and_doc("g2_1")[1] == 'spin axis g1 of rotor B1, a2 component (axis = "runtime")'
     )
+
+
+def test_a_polynomial_is_the_rings_own_conversion() -> None:
+    """gimbals._polynomial gives what ring.from_expr gives, shared
+    subexpressions, powers and rationals included; a symbol in a
+    denominator is a ValueError, as there (the proof then takes rational
+    functions as coefficients)."""
+    from sympy.polys.domains import QQ
+    from sympy.polys.orderings import lex
+    from sympy.polys.rings import ring
+
+    c, s, m, u = sm.symbols("c s m u")
+    shared = (sm.Rational(3, 7) * c - s * u) ** 2 + c * s
+    exprs = [shared * (shared - u) + sm.Rational(1, 3), sm.expand(shared**3), u, sm.S(5)]
+    r, *_ = ring([s, c, m, u], QQ, lex)
+    for e in exprs:
+        assert gimbals._polynomial(e, r) == r.from_expr(e)
+    with pytest.raises(ValueError):
+        gimbals._polynomial(shared / m, r)

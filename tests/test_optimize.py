@@ -11,6 +11,7 @@ from gyrogen.codegen.generate import full_model_unit
 from gyrogen.oracle import sampling
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.symbolic import equations, hoist, model, optimize, specialize
+from gyrogen.symbolic.derivative import Derivatives
 from gyrogen.symbolic.opcounts import variants
 
 RHS_GOAL = 50
@@ -170,3 +171,60 @@ def test_speed_controller_torque_is_rounded_once() -> None:
 
 def optimize_constants(opt: optimize.Optimized) -> set[sm.Symbol]:
     return {s for e in opt.rhs.outputs for s in e.free_symbols if s.name.startswith("c")}
+
+
+def _same(a: sm.Expr, b: sm.Expr) -> bool:
+    """The same tree, not merely equal values."""
+    return sm.srepr(a) == sm.srepr(b)
+
+
+def test_derivatives_are_sympys_own_expressions() -> None:
+    """Derivatives.of builds what sm.diff builds, node by node: Add, Mul,
+    Pow (numeric and symbolic exponents), sin, cos by its rules; Min, Max,
+    Abs and the rest through sm.diff; shared subexpressions and floats."""
+    x, y, z = sm.symbols("x y z", real=True)
+    shared = sm.sin(x * y) + 0.5 * z**2
+    exprs = [
+        x * y * z + 2.5 * x - sm.Rational(1, 3) * y,
+        (x + y) ** -1 * shared + shared**2 / (1 + z**2),
+        sm.sqrt(x**2 + y**2) * sm.cos(shared) - sm.sin(x) * sm.cos(y) * shared,
+        x**y + sm.Min(sm.Max(x - y, -1.0), 1.0) * z,
+        sm.Abs(x - z) + 3 * (x + 2 * y) * (y - z),
+        sm.Integer(7),
+        z,
+    ]
+    d = Derivatives()
+    for e in exprs:
+        for v in (x, y, z):
+            assert _same(d.of(e, v), sm.diff(e, v)), (e, v)
+
+
+@pytest.mark.parametrize("name", ["gyrostat", "speed_controlled"])
+def test_jacobian_entries_are_sympys(name: str) -> None:
+    """On a scene's right-hand side, its named values inlined (the
+    Jacobian's input): every entry the tree sm.diff gives."""
+    from gyrogen.scene import load
+
+    eqs = specialize.specialize(load(name))
+    opt = optimize.optimize(eqs)
+    inline: dict[sm.Symbol, sm.Expr] = {}
+    for a in opt.rhs.temporaries:
+        inline[a.lhs] = a.rhs.xreplace(inline)
+    f = [e.xreplace(inline) for e in opt.rhs.outputs]
+    d = Derivatives()
+    for fi in f:
+        for xj in eqs.states:
+            assert _same(d.of(fi, xj), sm.diff(fi, xj))
+
+
+def test_horner_forms_are_sympys_in_every_order() -> None:
+    """hoist._horner, its inner forms shared between orders, gives the
+    expression sm.horner gives for each order of the variables."""
+    import itertools
+
+    x, y, z = sm.symbols("x y z", real=True)
+    c = sm.symbols("c0:6", real=True)
+    poly = c[0] * x**2 * y + c[1] * x * y * z - c[2] * y**2 * z + c[3] * x + c[4] * z**3 + c[5]
+    done: dict = {}
+    for order in itertools.permutations((x, y, z)):
+        assert _same(hoist._horner(poly, order, done), sm.horner(poly, *order))

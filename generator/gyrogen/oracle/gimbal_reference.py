@@ -24,8 +24,13 @@ a fixed wheel is the same with g_g = 0, gd = 0 and no frame. Three laws:
 - each wheel about its axis:  J_k w' = u_s - b Omega (axisymmetric: no
   gyroscopic term about g_s).
 
-The accelerations (w_A', gd') solve a (3 + N) system per state, with numpy;
-a fixed wheel's row is gd' = 0. Vectorized over M states.
+The accelerations (w_A', gd') solve a (3 + N) system per state, symmetric
+positive definite: the gimbal rows first (each couples its own gd' to w_A'
+alone; a fixed wheel's row is gd' = 0), then what is left for w_A', a 3x3
+system, by Gaussian elimination. Vectorized over M states: every array holds
+components first and states last (a vector of each rotor (3, N, M), a
+matrix (3, 3, N, M)), each operation a numpy one on whole arrays of states;
+the functions take and return states first, (M, 3) and (M, N).
 """
 
 from __future__ import annotations
@@ -137,8 +142,9 @@ def point_inertia(v: Values) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Frames:
-    """Per state and rotor (M, N, 3): the spin axis, g_g x g_s, the gimbal
-    axis; and K (M, N, 3, 3), the rotor's inertia fixed in its gimbal."""
+    """Per rotor and state (3, N, M), components first: the spin axis,
+    g_g x g_s, the gimbal axis; and K (3, 3, N, M), the rotor's inertia
+    fixed in its gimbal."""
 
     g_s: np.ndarray
     g_t: np.ndarray
@@ -146,19 +152,47 @@ class Frames:
     K: np.ndarray
 
 
+_UPPER = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2])
+"""A symmetric 3x3 matrix's six entries (rows, columns)."""
+_FULL = [[0, 1, 2], [1, 3, 4], [2, 4, 5]]
+"""Where each of the nine entries sits among the six."""
+
+
 def frames(v: Values, gam: np.ndarray) -> Frames:
     """The gimbal frames at angles gam (M, N); a fixed wheel's angle is ignored.
     K as a sum of constant tensors times cos^2, sin^2, cos sin, cos, sin
-    (_inertia_terms): no 3x3 matrix product per state and rotor."""
-    angle = np.where(v.has_gimbal, gam, 0.0)
-    c, s = np.cos(angle)[..., None], np.sin(angle)[..., None]
-    g_s = c * v.g_s0 + s * np.cross(v.g_g, v.g_s0)
-    g_g = np.broadcast_to(v.g_g, g_s.shape)
-    g_t = np.cross(g_g, g_s)
-    t = _inertia_terms(v)
-    c, s = c[..., None], s[..., None]
+    (_inertia_terms): no 3x3 matrix product per state and rotor; its six
+    entries (K is symmetric)."""
+    c, s, a, b = _turn(v, gam)
+    g_s = c * a + s * b
+    g_t = c * b - s * a  # g_g x g_s: g_g is a unit vector perpendicular to g_s0
+    g_g = np.broadcast_to(_each(v.g_g), g_s.shape)
+    t = _inertia_terms(v)[:, :, _UPPER[0], _UPPER[1], None]  # (6, N, 6, 1)
+    t = t.transpose(0, 2, 1, 3)  # (6 terms, 6 entries, N, 1)
     k = t[0] + c * (c * t[1] + s * t[3] + t[4]) + s * (s * t[2] + t[5])
-    return Frames(g_s, g_t, g_g, k)
+    return Frames(g_s, g_t, g_g, k[_FULL])
+
+
+def _turn(v: Values, gam: np.ndarray) -> tuple[np.ndarray, ...]:
+    """cos and sin of the gimbal angles (N, M) (a fixed wheel's: 0), g_s0 and
+    g_g x g_s0 (3, N, 1): g_s = c g_s0 + s g_g x g_s0."""
+    angle = _rotor(np.where(v.has_gimbal, gam, 0.0))
+    return np.cos(angle), np.sin(angle), _each(v.g_s0), _each(np.cross(v.g_g, v.g_s0))
+
+
+def _rotor(x: np.ndarray) -> np.ndarray:
+    """(M, N) per state and rotor -> (N, M), contiguous."""
+    return np.ascontiguousarray(np.asarray(x).T)
+
+
+def _each(x: np.ndarray) -> np.ndarray:
+    """A vector per rotor (N, 3) -> (3, N, 1), to broadcast over states."""
+    return np.ascontiguousarray(x.T)[..., None]
+
+
+def _state(x: np.ndarray) -> np.ndarray:
+    """A vector per state (M, 3) -> (3, 1, M), to broadcast over rotors."""
+    return np.ascontiguousarray(np.asarray(x).T)[:, None, :]
 
 
 def _inertia_terms(v: Values) -> np.ndarray:
@@ -193,23 +227,30 @@ def _inertia_terms(v: Values) -> np.ndarray:
 
 
 def _apply(a: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """a x for stacks of 3x3 matrices a (..., 3, 3) and vectors x (..., 3)."""
-    return (a @ x[..., None])[..., 0]
+    """a x, a (3, 3, ...) and x (3, ...): components first."""
+    return a[:, 0] * x[0] + a[:, 1] * x[1] + a[:, 2] * x[2]
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a . b over the last axis."""
-    return (a * b).sum(-1)
+    """a . b, components first."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b, components first."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])  # fmt: skip
 
 
 def _rates(v: Values, f: Frames, w_A: np.ndarray, gd: np.ndarray) -> np.ndarray:
-    """w_G (M, N, 3); a fixed wheel's gd is ignored."""
-    return w_A[:, None, :] + np.where(v.has_gimbal, gd, 0.0)[..., None] * f.g_g
+    """w_G (3, N, M) from w_A (3, 1, M) and gd (N, M); a fixed wheel's gd is
+    ignored."""
+    return w_A + np.where(v.has_gimbal[:, None], gd, 0.0) * f.g_g
 
 
 def _momenta(v: Values, f: Frames, w_G: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """h_k about each rotor's mass center (M, N, 3)."""
-    return _apply(f.K, w_G) + (v.J * w)[..., None] * f.g_s
+    """h_k about each rotor's mass center (3, N, M), w (N, M)."""
+    return _apply(f.K, w_G) + (v.J[:, None] * w) * f.g_s
 
 
 def relative_spin(
@@ -217,8 +258,12 @@ def relative_spin(
 ) -> np.ndarray:
     """Omega = w - g_s . w_A (M, N): each wheel's rate relative to its gimbal
     (f: the frames at gam, if the caller has them)."""
-    f = frames(v, gam) if f is None else f
-    return w - _dot(f.g_s, w_A[:, None, :])
+    if f is None:  # the spin axes alone
+        c, s, a, b = _turn(v, gam)
+        g_s = c * a + s * b
+    else:
+        g_s = f.g_s
+    return np.asarray(w) - _dot(g_s, _state(w_A)).T
 
 
 def angular_momentum(
@@ -227,7 +272,9 @@ def angular_momentum(
 ) -> np.ndarray:  # fmt: skip
     """H about C (M, 3), A-components."""
     f = frames(v, gam) if f is None else f
-    return w_A @ point_inertia(v).T + _momenta(v, f, _rates(v, f, w_A, gd), w).sum(1)
+    w_a = _state(w_A)
+    h = _momenta(v, f, _rates(v, f, w_a, _rotor(gd)), _rotor(w)).sum(1)
+    return (point_inertia(v) @ w_a[:, 0] + h).T
 
 
 def kinetic_energy(
@@ -236,9 +283,10 @@ def kinetic_energy(
 ) -> np.ndarray:  # fmt: skip
     """T (M,): the carrier and the points, each frame and each wheel."""
     f = frames(v, gam) if f is None else f
-    w_G = _rates(v, f, w_A, gd)
-    rotors = _dot(w_G, _apply(f.K, w_G)).sum(1) + (v.J * w**2).sum(1)
-    return 0.5 * (_dot(w_A, w_A @ point_inertia(v).T) + rotors)
+    w_a = _state(w_A)
+    w_G = _rates(v, f, w_a, _rotor(gd))
+    rotors = _dot(w_G, _apply(f.K, w_G)).sum(0) + (v.J[:, None] * _rotor(w) ** 2).sum(0)
+    return 0.5 * (_dot(w_a[:, 0], point_inertia(v) @ w_a[:, 0]) + rotors)
 
 
 def power(
@@ -273,28 +321,48 @@ def derivatives(
     wheel's row: gd' = 0); w' comes first, from each wheel's own law
     (f: the frames at gam, if the caller has them)."""
     f = frames(v, gam) if f is None else f
-    rate = np.where(v.has_gimbal, gd, 0.0)
-    w_G = _rates(v, f, w_A, gd)
-    h = _momenta(v, f, w_G, w)
-    omega = relative_spin(v, gam, w_A, w, f)
-    w_dot = (u_s - v.b * omega) / v.J
+    on = v.has_gimbal[:, None]
+    w_a, spin_rate = _state(w_A), _rotor(w)
+    rate = np.where(on, _rotor(gd), 0.0)
+    w_G = _rates(v, f, w_a, rate)
+    k_w = _apply(f.K, w_G)
+    h = k_w + (v.J[:, None] * spin_rate) * f.g_s
+    omega = spin_rate - _dot(f.g_s, w_a)
+    J = v.J[:, None]
+    w_dot = (_rotor(u_s) - v.b[:, None] * omega) / J
     # K' w_G, K' = gd (S K - K S) in A: gd (g_g x K w_G - K (g_g x w_G)),
     # products of a matrix and a vector (two 3x3 matrix products cost 5x more)
-    turned = np.cross(f.g_g, _apply(f.K, w_G)) - _apply(f.K, np.cross(f.g_g, w_G))
-    k_dot_w = rate[..., None] * turned
-    total = w_A @ point_inertia(v).T + h.sum(1)
-    spin = v.J[:, None] * (w_dot[..., None] * f.g_s + (w * rate)[..., None] * f.g_t)
-    m, n = gam.shape
-    mat = np.zeros((m, 3 + n, 3 + n))
-    rhs = np.zeros((m, 3 + n))
+    k_dot_w = rate * (_cross(f.g_g, k_w) - _apply(f.K, _cross(f.g_g, w_G)))
+    i_p = point_inertia(v)
+    total = i_p @ w_a[:, 0] + h.sum(1)
+    spin = J * (w_dot * f.g_s + (spin_rate * rate) * f.g_t)
     k_g = _apply(f.K, f.g_g)  # K g_g: how gd' turns the momentum
-    mat[:, :3, :3] = point_inertia(v) + f.K.sum(1)
-    mat[:, :3, 3:] = k_g.transpose(0, 2, 1)
-    mat[:, 3:, :3] = k_g  # K symmetric: g_g^T K
-    diag = np.where(v.has_gimbal, _dot(f.g_g, k_g), 1.0)
-    mat[:, 3:, 3:] = diag[..., None] * np.eye(n)
-    rhs[:, :3] = -np.cross(w_A, total) - (k_dot_w + spin).sum(1)
-    torque = u_g - _dot(f.g_g, k_dot_w + np.cross(w_A[:, None, :], h))
-    rhs[:, 3:] = np.where(v.has_gimbal, torque, 0.0)
-    acc = np.linalg.solve(mat, rhs[..., None])[..., 0]
-    return acc[:, :3], rate, acc[:, 3:], w_dot
+    # the system [[A, B^T], [B, D]] (w_A', gd') = (r, torque): A the carrier's
+    # block, B's row k = g_g^T K (K symmetric), D diagonal
+    a = i_p[..., None] + f.K.sum(2)
+    d = np.where(on, _dot(f.g_g, k_g), 1.0)
+    r = -_cross(w_a[:, 0], total) - (k_dot_w + spin).sum(1)
+    torque = _rotor(u_g) - _dot(f.g_g, k_dot_w + _cross(w_a, h))
+    torque = np.where(on, torque, 0.0)
+    # each gimbal row gives gd' in terms of w_A'; what is left for w_A':
+    # (A - B^T D^-1 B) w_A' = r - B^T D^-1 torque
+    scaled = k_g / d
+    w_a_dot = _solve_symmetric(
+        a - (scaled[:, None] * k_g[None]).sum(2), r - (scaled * torque).sum(1)
+    )
+    gd_dot = (torque - _dot(k_g, w_a_dot[:, None])) / d
+    return w_a_dot.T, rate.T, gd_dot.T, w_dot.T
+
+
+def _solve_symmetric(a: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """x with a x = y per state, a (3, 3, M) symmetric positive definite (its
+    upper triangle read), y (3, M): Gaussian elimination, no pivoting (none
+    is needed for such a matrix)."""
+    l1, l2 = a[0, 1] / a[0, 0], a[0, 2] / a[0, 0]
+    a11, a12, a22 = a[1, 1] - l1 * a[0, 1], a[1, 2] - l1 * a[0, 2], a[2, 2] - l2 * a[0, 2]
+    y1, y2 = y[1] - l1 * y[0], y[2] - l2 * y[0]
+    l12 = a12 / a11
+    x2 = (y2 - l12 * y1) / (a22 - l12 * a12)
+    x1 = (y1 - a12 * x2) / a11
+    x0 = (y[0] - a[0, 1] * x1 - a[0, 2] * x2) / a[0, 0]
+    return np.stack([x0, x1, x2])

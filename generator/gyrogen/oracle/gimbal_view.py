@@ -51,8 +51,26 @@ def _gimbal_axis(r: Rotor, k: int, runtime: dict[str, float]) -> np.ndarray:
     return g / np.linalg.norm(g)
 
 
+_held: tuple[Scene, list[tuple[str, float]], gimbal_reference.Values] | None = None
+
+
 def values(scene: Scene, runtime: dict[str, float]) -> gimbal_reference.Values:
-    """The scene's numbers, the runtime ones from runtime by their p[] names."""
+    """The scene's numbers, the runtime ones from runtime by their p[] names;
+    the last ones kept (read-only): a comparison asks for them at every
+    function, perturbation and output of one parameter set."""
+    global _held
+    key, held = sorted(runtime.items()), _held  # one read: another thread may replace it
+    if held is not None and held[0] is scene and held[1] == key:
+        return held[2]
+    v = _values(scene, runtime)
+    for a in v.__dict__.values():
+        if isinstance(a, np.ndarray):
+            a.setflags(write=False)
+    _held = (scene, key, v)
+    return v
+
+
+def _values(scene: Scene, runtime: dict[str, float]) -> gimbal_reference.Values:
     p = {n: float(runtime[n] if v == "runtime" else v) for n, v in scene.parameters.items()}
     i12, i13, i23 = p.get("I12", 0.0), p.get("I13", 0.0), p.get("I23", 0.0)
     carrier = np.array([[p["I11"], i12, i13], [i12, p["I22"], i23], [i13, i23, p["I33"]]])
@@ -274,5 +292,5 @@ def condition(scene: Scene, runtime: dict[str, float]) -> float:
     points' inertia and each rotor's, the wheels' J g_s g_s^T left out)."""
     v = values(scene, runtime)
     f = gimbal_reference.frames(v, np.zeros((1, len(v.m))))
-    a = gimbal_reference.point_inertia(v) + f.K[0].sum(0)
+    a = gimbal_reference.point_inertia(v) + f.K[..., 0].sum(2)
     return float(np.linalg.norm(a) * np.linalg.norm(np.linalg.inv(a)))

@@ -34,13 +34,16 @@ is the solved u'.
 from __future__ import annotations
 
 import dataclasses
+import functools
+import operator
 from typing import Any
 
 import sympy as sm
 import sympy.physics.mechanics as me
 from sympy.polys.domains import QQ
 from sympy.polys.orderings import lex
-from sympy.polys.rings import PolyElement, ring
+from sympy.polys.polyerrors import CoercionFailed
+from sympy.polys.rings import PolyElement, PolyRing, ring
 
 from gyrogen.abi_rotors import (
     AXIS,
@@ -184,17 +187,28 @@ def kane(carrier: sm.Matrix, units: list[Unit]) -> tuple[sm.Matrix, sm.Matrix, s
             on_a -= net * g
             continue
         i = gim.index(x)
-        g_s, g_t = (vec(v) for v in x.frames(sm.cos(gam[i]), sm.sin(gam[i])))
-        g_g = vec(x.g_g)
+        axes = x.frames(sm.cos(gam[i]), sm.sin(gam[i]))
+        g_s, g_t, g_g = vec(axes[0]), vec(axes[1]), vec(x.g_g)
         ug = sm.Symbol(f"ug{x.k}", real=True)
-        G = me.ReferenceFrame(f"G{x.k}")
+        folded = x.axis[0].is_number and x.g_g[0].is_number
+        if folded:
+            # G oriented from A, its axes (g_s, g_t, g_g): each inertia is
+            # constant in them (no time derivative of its components in A's)
+            G = A.orientnew(f"G{x.k}", "DCM", sm.Matrix.hstack(*axes, x.g_g))
+            G.set_ang_vel(A, gam[i].diff(t) * g_g)
+            e_s, e_t, e_g = G.x, G.y, G.z
+        else:  # runtime axes, orthonormal modulo the proof's relations: in A's
+            G = me.ReferenceFrame(f"G{x.k}")
+            e_s, e_t, e_g = g_s, g_t, g_g
         w_G = omega + (nu[i] - g_g.dot(omega)) * g_g
         G.set_ang_vel(N, w_G)
         W = me.ReferenceFrame(f"W{x.k}")
         W.set_ang_vel(N, w_G + (w[j] - g_s.dot(w_G)) * g_s)
+        if folded:
+            W.set_ang_vel(G, (w[j] - g_s.dot(w_G)) * e_s)
         igs, igt, igg = x.inertia
-        frame = igs * (g_s | g_s) + igt * (g_t | g_t) + igg * (g_g | g_g)
-        wheel = x.I * ((g_t | g_t) + (g_g | g_g)) + x.J * (g_s | g_s)
+        frame = igs * (e_s | e_s) + igt * (e_t | e_t) + igg * (e_g | e_g)
+        wheel = x.I * ((e_t | e_t) + (e_g | e_g)) + x.J * (e_s | e_s)
         bodies += [me.RigidBody(f"G{x.k}", C, G, 0, (frame, C)),
                    me.RigidBody(f"W{x.k}", C, W, 0, (wheel, C))]  # fmt: skip
         loads += [(W, net * g_s), (G, ug * g_g - net * g_s)]
@@ -395,14 +409,43 @@ def _on_circles(e: sm.Expr, rel: Relations) -> PolyElement:
     others = sorted(e.free_symbols - set(rel.variables), key=str)
     try:  # a polynomial in every symbol
         r, *_ = ring([*rel.variables, *others], field, lex)
-        p = r.from_expr(e)
+        p = _polynomial(e, r)
     except ValueError:  # a runtime mass in a denominator: its rational functions as coefficients
         domain = field.frac_field(*others) if others else field
         r, *_ = ring(list(rel.variables), domain, lex)
-        p = r.from_expr(e)
+        p = _polynomial(e, r)
     for start, stop, basis in rel.blocks:
         p = _reduced(p, [r.from_expr(x) for x in basis], start, stop)
     return p
+
+
+def _polynomial(e: sm.Expr, r: PolyRing) -> PolyElement:
+    """r.from_expr(e) by its steps, each distinct subexpression converted
+    once: Kane's forcing repeats its subexpressions many times over (its
+    tree is ~20,000 operations, its polynomial ~240 terms)."""
+    gens = dict(zip(r.symbols, r.gens, strict=True))
+    done: dict[sm.Expr, PolyElement] = {}
+
+    def walk(x: sm.Expr) -> PolyElement:
+        got = gens.get(x, done.get(x))
+        if got is None:
+            if x.is_Add:
+                got = functools.reduce(operator.add, [walk(a) for a in x.args])
+            elif x.is_Mul:
+                got = functools.reduce(operator.mul, [walk(a) for a in x.args])
+            else:
+                base, exp = x.as_base_exp()
+                if exp.is_Integer and exp > 1:
+                    got = walk(base) ** int(exp)
+                else:
+                    got = r.ground_new(r.domain.convert(x))
+            done[x] = got
+        return got
+
+    try:
+        return r.ring_new(walk(sm.sympify(e)))
+    except CoercionFailed as exc:
+        raise ValueError(f"not a polynomial in {r}: {e}") from exc
 
 
 def _reduced(p: PolyElement, basis: list[PolyElement], start: int, stop: int) -> PolyElement:

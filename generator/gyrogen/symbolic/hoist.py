@@ -8,6 +8,8 @@ import itertools
 from collections.abc import Sequence
 
 import sympy as sm
+from sympy.polys.polyerrors import PolificationFailed
+from sympy.polys.polytools import poly_from_expr
 
 from gyrogen.symbolic.literals import as_double
 
@@ -65,12 +67,39 @@ def _best_horner(expr: sm.Expr, gens: Sequence[sm.Expr], gather: bool) -> sm.Exp
     if poly.total_degree() <= 1:  # linear: no order leaves fewer ops
         return shape(expr)
     best, best_ops = expr, int(sm.count_ops(expr))
+    done: dict[tuple[sm.Expr, tuple[sm.Expr, ...]], sm.Expr] = {}
     for order in _orders(poly):
-        cand = sm.horner(expr, *order)
+        cand = _horner(expr, tuple(order), done)
         ops = int(sm.count_ops(cand))
         if ops < best_ops:
             best, best_ops = cand, ops
     return shape(best)
+
+
+def _horner(
+    f: sm.Expr, gens: tuple[sm.Expr, ...], done: dict[tuple[sm.Expr, tuple[sm.Expr, ...]], sm.Expr]
+) -> sm.Expr:
+    """sm.horner(f, *gens) by its steps, each (expression, variables) once
+    in done: the orders that end alike share their inner forms (a
+    coefficient's form in the last variables), so trying every order does
+    not build them again. The same expression as sm.horner."""
+    key = (f, gens)
+    got = done.get(key)
+    if got is None:
+        try:
+            poly, _ = poly_from_expr(f, *gens)
+        except PolificationFailed as exc:
+            got = exc.expr
+        else:
+            got, gen = sm.S.Zero, poly.gen
+            if poly.is_univariate:
+                for coeff in poly.all_coeffs():
+                    got = got * gen + coeff
+            else:
+                for coeff in sm.Poly(poly, gen).all_coeffs():
+                    got = got * gen + _horner(coeff, gens[1:], done)
+        done[key] = got
+    return got
 
 
 def gathered(linear: sm.Expr) -> sm.Expr:

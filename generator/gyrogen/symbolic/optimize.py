@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import sympy as sm
 
 from gyrogen import physics
+from gyrogen.symbolic.derivative import Derivatives
 from gyrogen.symbolic.equations import TIME, Equations
 from gyrogen.symbolic.hoist import Hoister, hoist
 from gyrogen.symbolic.literals import as_double, writable_form
@@ -243,8 +244,9 @@ def _linear_model(
     f = [e.xreplace(shared) for e in (*kin, *dyn)]
     y = [hoist(_sincos(e), per_call, hoister) for exprs in pert.outputs.values() for e in exprs]
     at_zero = dict.fromkeys(pert.controls, sm.S.Zero)
+    d = Derivatives()
     entries = [
-        sm.diff(e, v).xreplace(at_zero)
+        d.of(e, v).xreplace(at_zero)
         for rows, columns in (
             (f, eqs.states),
             (f, pert.controls),
@@ -333,17 +335,18 @@ def _in_reduced_mass(lumped: dict[sm.Symbol, sm.Expr]) -> dict[sm.Symbol, sm.Exp
 def _jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
     """Row-major d f_i / d x_j of the hoisted right-hand side: it reads the
     same constants, so setup covers it too."""
-    entries = [sm.diff(fi, xj) for fi in f for xj in x]
+    d = Derivatives()
+    entries = [d.of(fi, xj) for fi in f for xj in x]
     return _cse(entries, _temporaries())
 
 
 def _sparse_jacobian(f: list[sm.Expr], x: Sequence[sm.Symbol]) -> Block:
     """_jacobian, each row differentiated only by the states it reads (a
     large augmented system is mostly zeros)."""
-    entries = []
+    entries, d = [], Derivatives()
     for fi in f:
         read = fi.free_symbols
-        entries += [sm.diff(fi, xj) if xj in read else sm.S.Zero for xj in x]
+        entries += [d.of(fi, xj) if xj in read else sm.S.Zero for xj in x]
     return _cse(entries, _temporaries())
 
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import sympy as sm
 
 from gyrogen.scene.rules import WRT_STATE
+from gyrogen.symbolic.derivative import Derivatives
 from gyrogen.symbolic.hoist import Hoister, constants
 
 IMPLICIT_MAX_NY = 128
@@ -96,7 +97,8 @@ def variational(
     """The variational system of f (hoisted: in states, inputs and the
     constants of hoister), its new constants d c_m / d p added to hoister."""
     n = len(states)
-    jac = [sm.diff(fi, xj) for fi in f for xj in states]
+    d = Derivatives()
+    jac = [d.of(fi, xj) for fi in f for xj in states]
     rows = pattern(jac, n)
     by_name = {p.name: p for p in params}
     columns: list[str] = []
@@ -142,4 +144,5 @@ def _parameter_column(
         slope = total_derivative(value, p, lumped)
         if slope != 0:
             slopes[c] = hoister.symbol_for(slope, simplify=False)
-    return [sm.Add(*(sm.diff(e, c) * s for c, s in slopes.items())) for e in f]
+    d = Derivatives()
+    return [sm.Add(*(d.of(e, c) * s for c, s in slopes.items())) for e in f]
