@@ -211,7 +211,7 @@ fmu-agreement: setup
 	$(BIN)/python benchmarks/fmu_agreement.py
 
 ## bench-lib: ns per rhs call of the CMake package under add_subdirectory: no build type
-## (the package's -O2), Release, and None (no -O flag: the flags before issue 15)
+## (the package's -O2), Release, and None (no -O flag: the package's flags before it added -O2)
 bench-lib: setup
 	$(BIN)/python benchmarks/bench_cmake_default.py
 

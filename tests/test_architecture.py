@@ -204,7 +204,7 @@ def test_the_adaptive_loops_share_the_driver() -> None:
 
 
 def test_each_integrator_is_written_once() -> None:
-    """Issue 20: every integrator, and what they share (start-up, step
+    """Every integrator, and what they share (start-up, step
     control, linear algebra, sin and cos), is described once in
     codegen/integrators and printed to scalar C, SIMD lanes and Fortran. A
     template may call a printed function; none defines one or holds the

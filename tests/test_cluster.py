@@ -241,7 +241,7 @@ def test_the_cluster_header_documents_its_rotors_and_codes() -> None:
 
 @pytest.mark.slow
 def test_the_jacobian_is_not_compared_across_a_torque_clamp(tmp_path: Path) -> None:
-    """rw4_pyramid with wheel 1 along a1 (issue 21: `verify` failed for some
+    """rw4_pyramid with wheel 1 along a1 (`verify` once failed for some
     seeds): wheel 1 sits 1e-6 rad/s past its clamp's kink, |k (rel - w_ref)|
     = tau_max, within the central differences' step. Straddling the kink,
     they are the derivative of neither side, and the verdict was FAIL; with

@@ -1,4 +1,4 @@
-"""The library as an outside developer uses it (issue 15): installed with
+"""The library as an outside developer uses it: installed with
 `cmake --install` and found by find_package, or by pkg-config; pulled into a
 C-only parent with add_subdirectory on a machine view with no Fortran
 compiler; and driven through ctypes from the installed manifest.json alone.

@@ -1,4 +1,4 @@
-"""`gyrogen fmu` (issue 15): the FMU passes FMPy's checks, FMPy simulates it
+"""`gyrogen fmu`: the FMU passes FMPy's checks, FMPy simulates it
 in both modes in agreement with `gyrogen simulate` (on a 1 s slice here;
 `make fmu-agreement` runs the whole t_end), bad parameter values through
 the FMI setters are FMI errors with a logged reason, its sources compile

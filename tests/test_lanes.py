@@ -1,4 +1,4 @@
-"""The lane-batched integrators (issue 12): each trajectory's result does
+"""The lane-batched integrators: each trajectory's result does
 not depend on the lane width, on the thread count or on the build's
 OpenMP, bit for bit, and equals the single-trajectory call's; the codes of
 failing lanes (a NaN, gimbal lock, the step budget) are theirs alone; and

@@ -116,10 +116,10 @@ def radau5_steps(scene: str, tols: tuple[float, ...]) -> dict[str, list[tuple]]:
     return {language: [run[1:4] for run in out] for language, out in runs.items()}
 
 
-def test_fortran_radau5_steps_as_c_radau5_on_the_scene_of_issue_19(
+def test_fortran_radau5_steps_as_c_radau5_on_a_quaternion_scene(
     cache_dir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Issue 19: on an Intel CPU Fortran radau5 stopped with code 1 (step
+    """On an Intel CPU, Fortran radau5 once stopped with code 1 (step
     size underflow) within 0.26 s at every tolerance, C radau5 did not
     (tests/regressions/fortran_radau5_quaternion.toml says why)."""
     monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
@@ -208,7 +208,7 @@ def test_c_and_fortran_run_every_method_alike_on_drawn_scenes(
     cache_dir: Path,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Issue 20: both languages print every integrator from one description,
+    """Both languages print every integrator from one description,
     so on drawn scenes they take the same accepted and rejected steps with
     every method (the Taylor method too where the scene is smooth; radau5
     at a loose and a tight tolerance besides) and end within 1e-14 (scaled

@@ -1,4 +1,4 @@
-"""The strictness matrix of issue 6 on the generated default scene: two C
+"""The strictness matrix on the generated default scene: two C
 compilers, two standards, every warning an error; the header from C++; the
 Fortran module; and the examples under AddressSanitizer + UBSan and valgrind.
 

@@ -1,4 +1,4 @@
-"""Issue 23, a sweep at scale: the summary streams over the parts (10^4 parts
+"""A sweep at scale: the summary streams over the parts (10^4 parts
 under `ulimit -n 256`), its median and p99 are numpy's exactly, another
 --chunk resumes the same sweep, the code is built for the workers' CPU,
 recorded, which a worker on another refuses (or portable for any), and the

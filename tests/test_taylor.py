@@ -1,4 +1,4 @@
-"""The Taylor series integrator (issue 22): the scene's rhs as elementary
+"""The Taylor series integrator: the scene's rhs as elementary
 operations (gyrogen.symbolic.jet), its coefficients by the recurrences of
 automatic differentiation, printed once to C and Fortran
 (gyrogen.codegen.integrators.taylor). Against sympy's own series, a
