@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen import abi
 from gyrogen.runtime import flags
@@ -57,6 +58,7 @@ def _codes(block: bytes, which: int) -> np.ndarray:
 
 
 @pytest.mark.parametrize("build", ["fast", "portable"])
+@WIDE
 def test_results_do_not_depend_on_lanes_or_threads(
     source_dir: Path, tmp_path: Path, build: str
 ) -> None:

@@ -27,6 +27,7 @@ fuzz`'s thousands that the suite can afford."""
 
 
 @pytest.mark.parametrize("shard", range(SHARDS))
+@WIDE
 def test_every_drawn_scene_keeps_the_promise(
     shard: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -40,6 +41,7 @@ CLUSTER_EXAMPLES = 4
 """Drawn cluster scenes in CI (N = 1..6 rotors: each derived with KanesMethod)."""
 
 
+@WIDE
 def test_every_drawn_cluster_keeps_the_promise(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -55,6 +57,7 @@ on a gimbal: each derived with KanesMethod and proven equal to the momentum
 form, the slowest draws)."""
 
 
+@WIDE
 def test_every_drawn_cmg_cluster_keeps_the_promise(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -202,6 +205,7 @@ def every_method(scene: str, methods: tuple[str, ...] = EVERY) -> dict[str, list
     ],
     ids=["quaternion-native", "quaternion-portable", "euler312-native", "euler312-portable"],
 )
+@WIDE
 def test_c_and_fortran_run_every_method_alike_on_drawn_scenes(
     attitude: str,
     portable: bool,

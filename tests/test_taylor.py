@@ -14,6 +14,7 @@ import pytest
 import sympy as sm
 from sources import write_sources
 from test_integrators import tabled  # the wheel under a tabled torque
+from wide import WIDE
 
 from gyrogen import abi, methods
 from gyrogen.errors import GyrogenError, SceneError
@@ -67,6 +68,7 @@ def coefficients(
 
 
 @pytest.mark.slow
+@WIDE
 def test_the_recurrences_are_the_series_of_the_solution() -> None:
     """A small system with every operation: the recurrences' coefficients
     equal sympy's Taylor series of the exact solution's derivatives."""
