@@ -164,13 +164,11 @@ verify-axes: setup
 	GYROGEN_VERIFY_AXES=1 $(BIN)/python -m pytest -q -p no:cacheprovider -n 0 tests/test_gimbals.py \
 	  tests/test_sweep_misalign.py -k "reference and axes or pyramid_gimbal_runs"
 
-## test-wide: the cases the suite leaves to this target (tests/wide.py's mark, skipped there as
-## "make test-wide"): every built-in scene simulated and derived for `scenes --ops`, and the further built-in scenes and builds
-## on which C and Fortran run radau5 and every method alike
+## test-wide: the cases the suite leaves out (tests/wide.py's mark): further scenes, builds and pages
+## on paths the suite's cases take, the drawn-scene shards, the sanitizers, the examples' builds, the
+## sensitivities' costly checks and the sweeps at scale
 test-wide: setup
-	GYROGEN_WIDE=1 $(BIN)/python -m pytest -q -p no:cacheprovider -rs tests/test_scene_space.py \
-	  tests/test_simulate.py tests/test_scenes.py -k "radau5_take_the_same_steps_on_builtin or \
-	  every_method_alike or every_builtin_scene_simulates or op_counts"
+	GYROGEN_WIDE=1 $(BIN)/python -m pytest -q -p no:cacheprovider -m wide
 
 ## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
 ## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
@@ -211,7 +209,7 @@ fmu-agreement: setup
 	$(BIN)/python benchmarks/fmu_agreement.py
 
 ## bench-lib: ns per rhs call of the CMake package under add_subdirectory: no build type
-## (the package's -O2), Release, and None (no -O flag: the flags before issue 15)
+## (the package's -O2), Release, and None (no -O flag: the package's flags before it added -O2)
 bench-lib: setup
 	$(BIN)/python benchmarks/bench_cmake_default.py
 

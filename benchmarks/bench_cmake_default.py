@@ -1,5 +1,5 @@
 """`make bench-lib`: what the CMake package's build type does to the rhs
-(issue 15: with no build type the library used to build with no -O flag).
+(with no build type the library once built with no -O flag).
 
     python benchmarks/bench_cmake_default.py [--rounds N] [--out DIR]
 
@@ -10,7 +10,7 @@ configured three ways side by side:
 - no build type: what a parent that gives none gets now (the package adds -O2);
 - Release: what the package on its own defaults to (CMake's -O3);
 - None: a build type with no flags, i.e. `-std=c99 -fPIC` alone, the
-  library's flags before issue 15 (the peer).
+  library's flags before the package added -O2 (the peer).
 
 Each program reports its best of 7 runs of 2e6 calls, timed by the
 process's CPU time (the machine is shared); the programs run in turn for N
@@ -29,7 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = ROOT / "generated" / "gyrostat"
 TIMING = Path(__file__).resolve().parent / "rhs_timing.c"
-BUILD_TYPES = {"no build type": None, "Release": "Release", "None (before issue 15)": "None"}
+BUILD_TYPES = {"no build type": None, "Release": "Release", "None (no -O flag)": "None"}
 PARENT = """cmake_minimum_required(VERSION 3.15)
 project(timing LANGUAGES C)
 add_subdirectory(gyrostat)

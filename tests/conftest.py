@@ -179,20 +179,28 @@ def check_builds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Compiled
 
 
 LONG_POLES = (
-    "test_strict.py::test_c_example_under_sanitizers",
-    "test_scene_space.py::test_every_drawn_scene_keeps_the_promise",
-    "test_scene_space.py::test_every_drawn_cluster_keeps_the_promise",
     "test_docs.py::test_every_snippet_runs[README.md]",
+    "test_scene_space.py::test_scenes_the_fuzzing_broke_keep_the_promise",
+    "test_generated.py::test_checked_in_scene_is_fresh",
 )
-"""The tests of a minute or more each (ASan + UBSan compiles of the default
-scene's 140 kB rhs, the drawn-scene shards, the README's quick starts): collected first, so that
-pytest-xdist starts them at once instead of leaving one on a worker at the
-end of the run while the other waits. (test_strict's verify path under the
-sanitizers links the example's sanitized build: it stays in its place, by
-when that build is done, rather than wait on it here.)"""
+"""The suite's longest tests (the README's quick starts; the scenes the
+fuzzing broke, each compiled by three compilers; every built-in scene derived
+against generated/): collected first, so that pytest-xdist starts them at
+once instead of leaving one on a worker at the end of the run while the
+other waits."""
+
+WIDE_RUN = "GYROGEN_WIDE"
+"""Set (`make test-wide`), the cases marked wide (tests/wide.py) are run;
+unset, the suite deselects them."""
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if not os.environ.get(WIDE_RUN):
+        wide = [item for item in items if item.get_closest_marker("wide")]
+        if wide:
+            config.hook.pytest_deselected(items=wide)
+            items[:] = [item for item in items if not item.get_closest_marker("wide")]
+
     def rank(item: pytest.Item) -> int:
         for i, pole in enumerate(LONG_POLES):
             if pole in item.nodeid:
@@ -200,3 +208,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         return len(LONG_POLES)
 
     items.sort(key=rank)  # stable: the rest keep their order
+
+
+def pytest_report_header(config: pytest.Config) -> str | None:
+    if os.environ.get(WIDE_RUN):
+        return None
+    return "the cases marked wide are deselected: make test-wide runs them"

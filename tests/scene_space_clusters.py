@@ -87,7 +87,7 @@ def _rotor(rng: np.random.Generator, scale: float, runtime: set[str], k: int) ->
 
 LAYOUTS = ("random", "random", "carrier axes", "coplanar")
 """How the rotors' axes lie: anywhere, along the carrier's a1, a2, a3 (either
-sign), or all in one plane (issue 21: such clusters failed `verify`)."""
+sign), or all in one plane (such clusters once failed `verify`)."""
 
 
 def _lay_axes(rotors: list[dict[str, object]], layout: str, rng: np.random.Generator) -> None:

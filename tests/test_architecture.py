@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 
 import pytest
+from wide import WIDE
 
 PACKAGE = Path(__file__).resolve().parents[1] / "generator" / "gyrogen"
 STAGES = (
@@ -159,6 +160,7 @@ def test_the_rendering_digest_reads_every_module_rendering_imports() -> None:
 
 
 @pytest.mark.slow  # a scene rendered in a new interpreter: 10 s
+@WIDE
 def test_rendering_loads_no_module_its_digest_leaves_out() -> None:
     """A new interpreter renders a scene with events, outputs and
     sensitivities: every gyrogen module loaded by then is one the rendering
@@ -204,7 +206,7 @@ def test_the_adaptive_loops_share_the_driver() -> None:
 
 
 def test_each_integrator_is_written_once() -> None:
-    """Issue 20: every integrator, and what they share (start-up, step
+    """Every integrator, and what they share (start-up, step
     control, linear algebra, sin and cos), is described once in
     codegen/integrators and printed to scalar C, SIMD lanes and Fortran. A
     template may call a printed function; none defines one or holds the

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from wide import WIDE
 
 from gyrogen import methods
 from gyrogen.scene import load
@@ -50,6 +51,7 @@ def test_every_method_is_timed(
 
 
 @pytest.mark.slow
+@WIDE
 def test_a_baseline_runs_beside(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from matplotlib.image import imread
+from wide import WIDE
 
 from gyrogen.analysis.check import cases, engine
 from gyrogen.analysis.simulate.plots import PIXELS
@@ -36,6 +37,7 @@ def _colours(png: Path) -> int:
     return len(np.unique(pixels.reshape(-1, pixels.shape[-1]), axis=0))
 
 
+@WIDE
 def test_one_figure_per_case_of_each_kind(tmp_path: Path, cli) -> None:
     """The refused cases too (by setup, and by the cluster scene's own rules
     at generation): the figure says why in words, so it is not blank."""
@@ -56,6 +58,7 @@ def test_every_built_in_case_declares_its_extreme_quantity() -> None:
     [c for c in EVERY if c.extreme is not None and c.extreme.values is not None],
     ids=lambda c: c.name,
 )
+@WIDE
 def test_extreme_quantity_is_finite_on_a_short_run(
     case: engine.Case, check_builds: dict[str, Compiled]
 ) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.oracle import cluster_reference, scene_view
 from gyrogen.oracle.compare import compare
@@ -180,6 +181,7 @@ def random_cluster(rng: np.random.Generator, n: int) -> str:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("n", range(1, 7))
+@WIDE
 def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
     n: int, tmp_path: Path
 ) -> None:
@@ -204,6 +206,7 @@ def test_random_torque_free_cluster_matches_reference_and_holds_momentum(
 
 
 @pytest.mark.slow
+@WIDE
 def test_bench_clusters_slice() -> None:
     """`make bench-clusters`'s measurement (cluster_msolve) on a slice: both
     variants compiled into one library agree with the reference on 200
@@ -240,8 +243,9 @@ def test_the_cluster_header_documents_its_rotors_and_codes() -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_the_jacobian_is_not_compared_across_a_torque_clamp(tmp_path: Path) -> None:
-    """rw4_pyramid with wheel 1 along a1 (issue 21: `verify` failed for some
+    """rw4_pyramid with wheel 1 along a1 (`verify` once failed for some
     seeds): wheel 1 sits 1e-6 rad/s past its clamp's kink, |k (rel - w_ref)|
     = tau_max, within the central differences' step. Straddling the kink,
     they are the derivative of neither side, and the verdict was FAIL; with

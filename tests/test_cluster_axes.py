@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_cluster_runtime import W_REF
+from wide import WIDE
 
 from gyrogen.abi_rotors import AXIS_NORM_SLACK
 from gyrogen.analysis.check.engine import axes_span
@@ -42,6 +43,7 @@ def _p(scene: Scene, **change: float) -> np.ndarray:
 
 
 @pytest.mark.slow
+@WIDE
 def test_p_holds_each_axis_after_its_position(built) -> None:
     scene, backends = built
     assert scene.runtime[7:17] == ("m_1", "I_1", "J_1", "r1_1", "r2_1", "r3_1", "g1_1", "g2_1",
@@ -79,6 +81,7 @@ def test_the_issues_size(built) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("language", ["c", "fortran"])
+@WIDE
 def test_at_the_folded_values_it_is_the_folded_scene(
     language: Language, built, tmp_path: Path
 ) -> None:

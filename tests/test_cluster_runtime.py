@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.analysis.linearize import engine
 from gyrogen.codegen.context import make_context
@@ -174,6 +175,7 @@ def test_the_linear_model_reads_them_from_p(built) -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_random_axes_with_everything_runtime(tmp_path: Path) -> None:
     """Six wheels on axes off the carrier's (exact rationals of denominators
     ~1e9): I~'s entries stay sums as the formulas give them (put over a
@@ -204,6 +206,7 @@ def test_random_axes_with_everything_runtime(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_a_runtime_diagonal_beside_negative_folded_products(tmp_path: Path, cli) -> None:
     """rw4_pyramid with I11 and wheel 1's J at run time, the rest as shipped:
     setup's checks fold I12 = -4.0 beside the runtime I11 (pd2 = I11*380.0

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.analysis.linearize import engine
 from gyrogen.oracle import cluster_reference, scene_view
@@ -80,6 +81,7 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Scene, dict[Languag
 
 
 @pytest.mark.slow
+@WIDE
 def test_c_and_fortran_match_the_reference_across_the_tables(built) -> None:
     """rhs, outputs and Jacobian at random states, parameters and times
     spanning every table and beyond both ends (oracle.compare)."""
@@ -127,6 +129,7 @@ def test_the_reference_interpolates_per_state_times() -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_a_table_wheel_is_an_input_of_the_linear_model(built) -> None:
     """The linear model adds T_k to a table wheel's motor: B over w_k is
     1/J_k for the wheels whose clamp does not hold at the point."""

@@ -1,4 +1,4 @@
-"""The library as an outside developer uses it (issue 15): installed with
+"""The library as an outside developer uses it: installed with
 `cmake --install` and found by find_package, or by pkg-config; pulled into a
 C-only parent with add_subdirectory on a machine view with no Fortran
 compiler; and driven through ctypes from the installed manifest.json alone.
@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen import abi
 from gyrogen.codegen.generate import generate
@@ -74,6 +75,7 @@ def prefix(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     return prefix
 
 
+@WIDE
 def test_install_lays_out_a_package(prefix: Path) -> None:
     files = {str(p.relative_to(prefix)) for p in prefix.rglob("*") if not p.is_dir()}
     expected = {

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.abi import COMPILER_LOG_LINES
 from gyrogen.errors import BuildError
@@ -87,6 +88,7 @@ def test_rebuild_hits_the_cache(
 
 
 @pytest.mark.slow
+@WIDE
 def test_changed_source_gets_a_new_cache_entry(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
@@ -296,6 +298,7 @@ def test_relative_cache_root_is_made_absolute(
 
 
 @pytest.mark.slow
+@WIDE
 def test_both_languages_build_at_once_under_a_relative_cache(
     source_dir: Path, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:

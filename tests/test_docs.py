@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from wide import WIDE
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
@@ -81,10 +82,13 @@ def where(b: Block) -> str:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "page", [p for p in PAGES if runnable(p)], ids=lambda p: str(p.relative_to(ROOT))
+    "page",
+    [p if p.name == "README.md" else pytest.param(p, marks=WIDE) for p in PAGES if runnable(p)],
+    ids=lambda p: str(p.relative_to(ROOT)),
 )
 def test_every_snippet_runs(page: Path, tmp_path: Path) -> None:
-    """The page's shell and Python blocks, in order, in one fresh directory."""
+    """The page's shell and Python blocks, in order, in one fresh directory
+    (the README's in the suite; the guides' in `make test-wide`)."""
     for b in runnable(page):
         if RUNS[b.lang] == "python":
             cmd = [sys.executable, "-c", b.code]

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sources import write_sources
+from wide import WIDE
 
 from gyrogen.analysis.simulate import engine
 from gyrogen.errors import SceneError
@@ -122,6 +123,7 @@ def test_a_scene_without_events_has_no_event_function(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow  # a cluster with events derived and compiled; the compiled events stay fast
+@WIDE
 def test_a_cluster_reads_its_outputs_and_runtime_axes(tmp_path: Path) -> None:
     """rw4_pyramid's momentum and per-wheel power, and a wheel's rate."""
     extra = """
@@ -203,6 +205,7 @@ def spin_up(tmp_path_factory: pytest.TempPathFactory) -> tuple[Compiled, Scene]:
 
 @pytest.mark.slow  # a built-in scene generated and compiled
 @pytest.mark.parametrize("method", ["dop853", "taylor"])
+@WIDE
 def test_the_builtin_spin_up_logs_its_wheel_at_40_rad_s(
     spin_up: tuple[Compiled, Scene], method: str
 ) -> None:
@@ -824,6 +827,7 @@ def _turns(comp: Compiled, x0: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("lang", ["c", pytest.param("fortran", marks=pytest.mark.slow)])
+@WIDE
 def test_an_event_faster_than_the_motion_loses_no_crossing(
     spinning: tuple[Path, Scene], lang: str
 ) -> None:

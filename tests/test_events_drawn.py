@@ -15,6 +15,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 from sources import write_sources
+from wide import WIDE
 
 from gyrogen.oracle import scene_view
 from gyrogen.runtime import build
@@ -143,6 +144,7 @@ def drawn(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFacto
 
 @pytest.mark.slow  # a scene of twelve drawn events generated and compiled per seed
 @pytest.mark.parametrize("method", ADAPTIVE)
+@WIDE
 def test_drawn_events_are_the_independent_locators(drawn: tuple, method: str) -> None:
     """Each simple event's crossings, no more and no fewer, at scipy's times
     within 1e-8 s, or within 10 times what the method's own dense output's

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen import abi
 from gyrogen.oracle import reference, scene_view
@@ -72,6 +73,7 @@ def python_final() -> np.ndarray:
 
 
 @pytest.mark.parametrize("program", ["embed_c", "embed_fortran"])
+@WIDE
 def test_final_state_matches_python(programs: Path, python_final: np.ndarray, program: str) -> None:
     out = run(programs / program)
     assert list(out) == [*abi.STATES, *H_NAMES, "H_norm"]
@@ -156,6 +158,7 @@ CLUSTER_P = np.array([100.0, -50.0, 80.0, 30.0])
 CLUSTER_X0 = np.array([0.0, 0.0, 0.0, 0.01, 0.02, -0.01, 90.0, -40.0, 60.0, 30.0])
 
 
+@WIDE
 def test_cluster_example_matches_python(programs: Path) -> None:
     """embed_cluster: the same RK4 run on the cluster's numpy reference; H
     about the mass center held (the clamped motors are internal torques);
@@ -177,6 +180,7 @@ def test_cluster_example_matches_python(programs: Path) -> None:
     np.testing.assert_allclose([out[f"P{k}"] for k in (1, 2, 3, 4)], power, rtol=1e-9, atol=1e-12)
 
 
+@WIDE
 def test_cluster_example_links_the_lib_package(programs: Path, tmp_path: Path, cli) -> None:
     """`gyrogen generate rw4_pyramid --lib`: a parent CMake project adds the
     package and links embed_cluster against it, built static and shared

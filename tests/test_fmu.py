@@ -1,4 +1,4 @@
-"""`gyrogen fmu` (issue 15): the FMU passes FMPy's checks, FMPy simulates it
+"""`gyrogen fmu`: the FMU passes FMPy's checks, FMPy simulates it
 in both modes in agreement with `gyrogen simulate` (on a 1 s slice here;
 `make fmu-agreement` runs the whole t_end), bad parameter values through
 the FMI setters are FMI errors with a logged reason, its sources compile
@@ -25,6 +25,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.simulation import instantiate_fmu
 from fmpy.validation import validate_fmu
 from fmu_cases import BAR, MODES, build, build_model, by_fmpy, cases, differences, reference
+from wide import WIDE
 
 from gyrogen import abi, api, methods
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS
@@ -72,6 +73,7 @@ def simulated(label: str, root: Path) -> Any:
 
 
 @pytest.mark.parametrize("label", list(CASES))
+@WIDE
 def test_fmpy_finds_no_problem(fmus: dict[str, Path], label: str) -> None:
     assert validate_fmu(str(fmus[label])) == []
 
@@ -734,6 +736,7 @@ def test_the_same_scene_makes_the_same_bytes(fmus: dict[str, Path], tmp_path: Pa
     assert (tmp_path / "gyrostat.fmu").read_bytes() == fmus["default"].read_bytes()
 
 
+@WIDE
 def test_the_scenes_events_end_both_kinds_of_simulation(tmp_path: Path) -> None:
     """dual_spin with sin(3 t) events and a terminal one where q3 passes
     0.3 rad (near 6 s): Model Exchange exposes them as event indicators and

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.codegen.generate import generate
 from gyrogen.codegen.ir.c import CPrinter
@@ -26,6 +27,7 @@ def test_generate_checks_before_it_writes(tmp_path: Path, cli) -> None:
 
 
 @pytest.mark.slow  # a second scene derived, compiled twice and checked; generate's check stays fast
+@WIDE
 def test_given_parameters_setup_refuses_are_left_out_of_the_check(tmp_path: Path, cli) -> None:
     """[simulate] parameters whose constants overflow (setup's code 9, which
     the validator cannot see): the code is still checked and written (at the
@@ -44,6 +46,7 @@ def test_no_check_skips_the_check(tmp_path: Path, cli) -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_wrong_code_is_not_written(tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every C double one part in 1e9 off: C differs from the reference and
     from the (right) Fortran; nothing is written."""

@@ -11,6 +11,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from wide import WIDE
 
 from gyrogen.oracle import cluster_reference
 from gyrogen.oracle import gimbal_reference as gr
@@ -240,6 +241,7 @@ def torque_free_drift(t_end: float = 60.0) -> dict[str, float]:
 
 
 @pytest.mark.slow
+@WIDE
 def test_torque_free_vscmgs_hold_energy_and_momentum_in_n() -> None:
     drift = torque_free_drift()
     print(" ".join(f"{k}={val:.3g}" for k, val in drift.items()))
@@ -247,6 +249,7 @@ def test_torque_free_vscmgs_hold_energy_and_momentum_in_n() -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_driven_vscmgs_gain_the_motors_work_less_friction() -> None:
     """T(t) - T(0) = the integral of sum(u_s Omega + u_g gd) - b Omega^2."""
     v = dataclasses.replace(vscmg3(), b=np.array([2e-3, 1e-3, 5e-4]))

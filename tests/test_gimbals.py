@@ -11,6 +11,7 @@ import pytest
 import sympy as sm
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from wide import WIDE
 
 from gyrogen import api
 from gyrogen.scene import Scene, SceneError, builtin_text, parse
@@ -266,6 +267,7 @@ def _energy_rate_and_power(scene: Scene, rng: np.random.Generator) -> list[tuple
 
 @pytest.mark.slow
 @pytest.mark.parametrize("text", [builtin_text("cmg4_pyramid"), MIXED], ids=["pyramid", "mixed"])
+@WIDE
 def test_the_energy_changes_by_the_motors_power(text: str) -> None:
     """dK/dt = sum_k (u_s Omega + u_g gd) - b Omega^2, the power output's sum."""
     for rate, power in _energy_rate_and_power(parse(text, "s.toml"), np.random.default_rng(3)):
@@ -275,6 +277,7 @@ def test_the_energy_changes_by_the_motors_power(text: str) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["taylor", "dop853"])
+@WIDE
 def test_vscmg3_conserves_energy_and_momentum_over_60_s(method: str) -> None:
     scene = parse(GOOD, "vscmg3.toml")
     compiled = api.compile(scene)
@@ -331,6 +334,7 @@ AXES_AT_RUN_TIME = pytest.mark.skipif(
              pytest.param(RUNTIME_AXES, marks=AXES_AT_RUN_TIME)],
     ids=["vscmg3", "cmg4_pyramid", "mixed", "runtime", "runtime axes"],
 )  # fmt: skip
+@WIDE
 def test_cmg_scenes_match_the_gimbal_reference(text: str, tmp_path: Path) -> None:
     from gyrogen.oracle.compare import compare
     from gyrogen.runtime.scene_build import build_scene

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sources import write_sources
+from wide import WIDE
 
 from gyrogen import abi, methods
 from gyrogen.runtime import build
@@ -284,6 +285,7 @@ QUATERNION_SPINUP = builtin_text("wheel_spinup").replace(
 
 
 @pytest.mark.slow  # a scene of its own, generated and built in C and Fortran
+@WIDE
 def test_euler_parameters_on_the_grid(tmp_path: Path, cache_dir: Path) -> None:
     """Euler parameters between step ends are the interpolant's: |e| = 1 to
     within the tolerance's scale; at the end, projected, as _integrate's."""

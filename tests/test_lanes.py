@@ -1,4 +1,4 @@
-"""The lane-batched integrators (issue 12): each trajectory's result does
+"""The lane-batched integrators: each trajectory's result does
 not depend on the lane width, on the thread count or on the build's
 OpenMP, bit for bit, and equals the single-trajectory call's; the codes of
 failing lanes (a NaN, gimbal lock, the step budget) are theirs alone; and
@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sources import write_sources
+from wide import WIDE
 
 from gyrogen import abi
 from gyrogen.runtime import flags
@@ -92,6 +93,7 @@ def _codes(block: bytes, which: int) -> np.ndarray:
 
 @pytest.mark.parametrize("sources", ["default", "radau5 laned"])
 @pytest.mark.parametrize("build", ["fast", "portable"])
+@WIDE
 def test_results_do_not_depend_on_lanes_or_threads(
     request: pytest.FixtureRequest, tmp_path: Path, build: str, sources: str
 ) -> None:

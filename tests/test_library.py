@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.codegen import buildfiles
 from gyrogen.errors import GyrogenError
@@ -101,6 +102,7 @@ def compile_flags(build: Path, source: str) -> str:
 
 
 @pytest.mark.slow
+@WIDE
 def test_cmake_alone(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:
     """On its own: Release, one static C library, no Fortran unless asked for;
     with BUILD_SHARED_LIBS a shared one with a SOVERSION."""
@@ -161,6 +163,7 @@ def test_cmake_add_subdirectory(lib_dir: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_make_fragment(lib_dir: Path, tmp_path: Path, backends: dict[str, Compiled]) -> None:
     """Included from a user's Makefile in another directory, outputs elsewhere."""
     user = tmp_path / "user"

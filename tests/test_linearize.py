@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen import api
 from gyrogen.analysis.check.engine import spin_stable
@@ -475,6 +476,7 @@ def test_api_linearize_refuses_what_the_cli_cannot_be_given(kw: dict, message: s
 
 
 @pytest.mark.slow  # two compilers
+@WIDE
 def test_verify_takes_a_scene_with_its_linear_model(tmp_path: Path, cli) -> None:
     """outputs.linear_model = true in a scene file: verify compares the
     rhs, the output functions and the Jacobian (before: KeyError

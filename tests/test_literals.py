@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import sympy as sm
 from sources import write_sources
+from wide import WIDE
 
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.statements import expression, symbol_names
@@ -130,6 +131,7 @@ T = 0.0
 
 
 @pytest.mark.slow
+@WIDE
 def test_folded_decimals_compile_everywhere_and_hold_momentum(tmp_path: Path) -> None:
     scene = parse(FOLDED_DECIMALS, "folded_decimals.toml")
     write_sources(scene, tmp_path)

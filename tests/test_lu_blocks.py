@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy as sm
+from wide import WIDE
 
 from gyrogen import methods
 from gyrogen.analysis.check.cases import quaternion_scene
@@ -71,6 +72,7 @@ SCENES = [name for name in builtin_names() if methods.needs_jacobian(load(name).
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [*SCENES, "quaternion"])
+@WIDE
 def test_blocks_cover_the_witness_jacobian(name: str) -> None:
     """What the template leaves out of the LU is zero in the paper's model:
     no entry below the diagonal outside a block, and no entry of a block's
@@ -134,6 +136,7 @@ def block_matrix(blocks: Blocks, rng: np.random.Generator) -> np.ndarray:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["stiff_wheel", "rw4_hardware"])
+@WIDE
 def test_generated_lu_solves_block_systems(name: str, tmp_path: Path) -> None:
     """The checked-in scene's LU (decomposition unrolled over U's pattern,
     exchanges only where a block has a row below), real and complex, solves
@@ -169,6 +172,7 @@ def pattern_matrix(entries: list[sm.Expr], n: int, rng: np.random.Generator) -> 
 
 
 @pytest.mark.slow
+@WIDE
 def test_generated_lu_solves_an_augmented_system(tmp_path: Path) -> None:
     """The variational unit's LU (x, then Phi's entries, which read x: the
     coupling below x's rows) solves random systems of its Jacobian's pattern
@@ -271,6 +275,7 @@ def shifted_solves(prefix: str, src: Path, entries: list[sm.Expr], blocks: Block
 
 
 @pytest.mark.slow
+@WIDE
 def test_generated_lu_shift_touches_only_stored_entries(tmp_path: Path) -> None:
     """The checked-in stiff_wheel's iteration matrices and the variational
     unit's (x, then Phi's entries coupled to it) are built and factored
@@ -349,6 +354,7 @@ int main(void)
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["stiff_wheel", "cmg4_pyramid"])
+@WIDE
 def test_complex_lu_over_lanes_is_the_scalar_one_bit_for_bit(name: str, tmp_path: Path) -> None:
     """lu_decompose_complex_lanes and lu_solve_complex_lanes (radau5's E2
     over lanes, pivots and Smith's division by selection) give each lane the

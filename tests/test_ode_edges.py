@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 from sources import write_sources
+from wide import WIDE
 
 from gyrogen import abi, methods
 from gyrogen.oracle import reference, scene_view
@@ -357,6 +358,7 @@ def test_gimbal_lock_is_never_stepped_over(angles: dict[str, Compiled], language
 
 
 @pytest.mark.parametrize("language", LANGUAGES)
+@WIDE
 def test_euler_parameters_pass_where_the_angles_stop(
     euler_parameters: dict[str, Compiled], language: str
 ) -> None:

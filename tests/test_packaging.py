@@ -14,6 +14,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from wide import WIDE
 
 pytestmark = pytest.mark.slow  # a wheel built and installed into a fresh venv
 
@@ -85,6 +86,7 @@ def run(venv: Path, *args: str, cwd: Path) -> str:
     return proc.stdout
 
 
+@WIDE
 def test_installed_wheel_runs_the_command_line(fresh: Path, tmp_path: Path) -> None:
     where = subprocess.run(
         [str(fresh / "bin" / "python"), "-c", "import gyrogen; print(gyrogen.__file__)"],

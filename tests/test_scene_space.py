@@ -27,6 +27,7 @@ fuzz`'s thousands that the suite can afford."""
 
 
 @pytest.mark.parametrize("shard", range(SHARDS))
+@WIDE
 def test_every_drawn_scene_keeps_the_promise(
     shard: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -40,6 +41,7 @@ CLUSTER_EXAMPLES = 4
 """Drawn cluster scenes in CI (N = 1..6 rotors: each derived with KanesMethod)."""
 
 
+@WIDE
 def test_every_drawn_cluster_keeps_the_promise(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -55,6 +57,7 @@ on a gimbal: each derived with KanesMethod and proven equal to the momentum
 form, the slowest draws)."""
 
 
+@WIDE
 def test_every_drawn_cmg_cluster_keeps_the_promise(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -116,10 +119,10 @@ def radau5_steps(scene: str, tols: tuple[float, ...]) -> dict[str, list[tuple]]:
     return {language: [run[1:4] for run in out] for language, out in runs.items()}
 
 
-def test_fortran_radau5_steps_as_c_radau5_on_the_scene_of_issue_19(
+def test_fortran_radau5_steps_as_c_radau5_on_a_quaternion_scene(
     cache_dir: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Issue 19: on an Intel CPU Fortran radau5 stopped with code 1 (step
+    """On an Intel CPU, Fortran radau5 once stopped with code 1 (step
     size underflow) within 0.26 s at every tolerance, C radau5 did not
     (tests/regressions/fortran_radau5_quaternion.toml says why)."""
     monkeypatch.setenv("GYROGEN_CACHE", str(cache_dir))
@@ -202,13 +205,14 @@ def every_method(scene: str, methods: tuple[str, ...] = EVERY) -> dict[str, list
     ],
     ids=["quaternion-native", "quaternion-portable", "euler312-native", "euler312-portable"],
 )
+@WIDE
 def test_c_and_fortran_run_every_method_alike_on_drawn_scenes(
     attitude: str,
     portable: bool,
     cache_dir: Path,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Issue 20: both languages print every integrator from one description,
+    """Both languages print every integrator from one description,
     so on drawn scenes they take the same accepted and rejected steps with
     every method (the Taylor method too where the scene is smooth; radau5
     at a loose and a tight tolerance besides) and end within 1e-14 (scaled

@@ -8,6 +8,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from wide import WIDE
 
 from gyrogen.abi import NAME_MAX_LENGTH
 from gyrogen.codegen.generate import generate
@@ -55,6 +56,7 @@ def test_a_description_ends_in_one_full_stop() -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("attitude", ["euler312", "quaternion"])
+@WIDE
 def test_hostile_text_and_longest_name_compile_cleanly(tmp_path: Path, attitude: str) -> None:
     name = "N" + "a1_" * ((NAME_MAX_LENGTH - 1) // 3)
     name = name[:NAME_MAX_LENGTH].rstrip("_")

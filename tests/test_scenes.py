@@ -356,6 +356,7 @@ def test_c_only_scene_builds_no_fortran(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", builtin_names())
+@WIDE
 def test_builtin_scene_matches_the_reference(name: str, tmp_path: Path) -> None:
     scene = load(name)
     write_sources(scene, tmp_path)

@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from scene_space import scenes
 from scipy import integrate
 from sources import write_sources
+from wide import WIDE
 
 from gyrogen.codegen.context import make_context
 from gyrogen.codegen.generate import unit_of
@@ -224,6 +225,7 @@ def test_phi_against_finite_differences(default_var, method):
 
 
 @pytest.mark.slow
+@WIDE
 def test_c_fortran_and_lanes_agree_bit_for_bit(default_var):
     """C = Fortran = the SIMD lanes of a batch, every entry of Phi."""
     c_build, f_build = default_var["c"], default_var["fortran"]
@@ -298,6 +300,7 @@ wrt = ["state"]
 
 
 @pytest.mark.slow
+@WIDE
 def test_gradient_of_momentum_conserved(tmp_path, cache_dir):
     """Torque-free, |H|^2 is a first integral: its gradient is carried by
     Phi, dH2(x(t))/dx . Phi(t) = dH2(x0)/dx."""
@@ -355,6 +358,7 @@ def test_against_heyoka(default_var):
 
 
 @pytest.mark.slow
+@WIDE
 def test_error_measured_on_the_state_alone(tmp_path, cache_dir):
     """sensitivities.error = "state": the step control measures x alone (Phi
     rides on its steps, fewer of them), and Phi still agrees with the
@@ -406,6 +410,7 @@ wrt = ["state"]
 
 
 @pytest.mark.slow
+@WIDE
 def test_phi_overflowing_is_a_code(tmp_path, cache_dir):
     """On an unstable equilibrium x stays put while Phi grows as e^(5 t):
     past t = 135 s it overflows. The run stops with a code (non-finite for
@@ -469,6 +474,7 @@ fixed two (about 30 s each), `make fuzz` FUZZ_VAR."""
 @settings(max_examples=VAR_EXAMPLES, deadline=None, derandomize=True, database=None,
           phases=[Phase.generate], suppress_health_check=list(HealthCheck))  # fmt: skip
 @given(drawn=scenes(), pick=st.randoms(use_true_random=False))
+@WIDE
 def test_drawn_scenes_against_finite_differences(drawn, pick, tmp_path_factory, cache_dir):
     """Drawn scenes (tests/scene_space.py), wrt the state and a draw of their
     runtime parameters: Phi agrees with the differences of the flow column by
@@ -519,6 +525,7 @@ def test_drawn_scenes_against_finite_differences(drawn, pick, tmp_path_factory, 
 
 
 @pytest.mark.slow
+@WIDE
 def test_every_parameter_of_a_cluster(tmp_path, cache_dir):
     """rw4_hardware with wrt naming the state and all 47 of its runtime
     parameters (a clamped motor among them): Phi is 10 x 57 and agrees with
@@ -542,6 +549,7 @@ def test_every_parameter_of_a_cluster(tmp_path, cache_dir):
 
 
 @pytest.mark.slow
+@WIDE
 def test_the_shooting_example_converges_quadratically():
     """examples/shooting.py: Newton on Phi reaches the start that nulls the
     nutation, each residual at most a constant times the square of the last."""

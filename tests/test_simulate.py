@@ -233,6 +233,7 @@ def test_anything_in_the_way_is_refused_before_any_work(
 
 
 @pytest.mark.slow
+@WIDE
 def test_a_huge_start_state_warns_nothing(tmp_path: Path, cache: None, cli) -> None:
     """u1 = 1e308: the stiffness estimate overflowed with a numpy
     RuntimeWarning and read 'decay rates up to inf'; now the rate is a
@@ -255,6 +256,7 @@ def test_a_huge_start_state_warns_nothing(tmp_path: Path, cache: None, cli) -> N
 
 
 @pytest.mark.slow
+@WIDE
 def test_a_start_state_whose_derivatives_overflow_is_one_line_exit_2(
     tmp_path: Path, cache: None, cli
 ) -> None:
@@ -274,6 +276,7 @@ def test_a_start_state_whose_derivatives_overflow_is_one_line_exit_2(
 
 @pytest.mark.slow
 @pytest.mark.parametrize("command", ["fmu", "bench"])
+@WIDE
 def test_fmu_and_bench_refuse_overflowing_parameters_in_one_line(
     tmp_path: Path, cache: None, cli, command: str
 ) -> None:
@@ -441,6 +444,7 @@ def test_failed_or_non_finite_solution_is_one_line() -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_fortran_only_scene_with_radau(tmp_path: Path, cache: None, cli) -> None:
     scene = torque_free_with(
         tmp_path / "fortran_only.toml", 'targets = ["c", "fortran"]', 'targets = ["fortran"]'
@@ -470,6 +474,7 @@ def test_simulate_with_a_compiled_integrator(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_compiled_integrator_at_gimbal_lock_is_one_line(tmp_path: Path, cache: None, cli) -> None:
     """A 3-1-2 scene started at q2 = pi/2: the compiled integrator's code 6
     becomes one line with its meaning; nothing is written."""
@@ -660,6 +665,7 @@ TABLE = (
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["dop853", "DOP853"])
+@WIDE
 def test_the_balances_close_on_a_torque_table(tmp_path: Path, cli, method: str) -> None:
     """gyrostat driven by a T(t) table: the run stepped across the table's
     points (segments of an eighth of an interval), its slope jumps and its
@@ -734,6 +740,7 @@ def test_ctrl_c_while_writing_leaves_nothing_in_out(
 
 
 @pytest.mark.slow
+@WIDE
 def test_an_event_only_a_table_pulse_makes_happen_is_located(tmp_path: Path, cache: None) -> None:
     """A wheel-rate event only a torque table's pulse of 5e-5 s (2.003 to
     2.0031 s, 0.5 N m at its peak) makes happen, located by simulate's

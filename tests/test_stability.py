@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen import abi, methods
 from gyrogen.analysis.check import cases, engine
@@ -90,6 +91,7 @@ def test_stiff_case_recommends_the_implicit_method(compiled: dict[str, Compiled]
 
 
 @pytest.mark.slow
+@WIDE
 def test_check_command(tmp_path: Path, cli) -> None:
     plots = tmp_path / "plots"
     code, out, _ = cli(["check", "--quick", "spin", "nominal", "--plots", str(plots)])
@@ -118,6 +120,7 @@ def test_check_unknown_case_is_a_usage_error(names: list[str], message: str, cli
 
 
 @pytest.mark.slow
+@WIDE
 def test_check_all_quick_from_the_command_line(cli) -> None:
     """What CI runs: every quick case, one table, exit 0."""
     code, out, _ = cli(["check", "--all", "--quick"])
@@ -161,6 +164,7 @@ def test_compensated_summation_keeps_a_long_run(
 
 
 @pytest.mark.slow
+@WIDE
 def test_two_scenes_of_one_name_get_a_build_each(
     tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
 ) -> None:

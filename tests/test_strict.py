@@ -1,4 +1,4 @@
-"""The strictness matrix of issue 6 on the generated default scene: two C
+"""The strictness matrix on the generated default scene: two C
 compilers, two standards, every warning an error; the header from C++; the
 Fortran module; and the examples under AddressSanitizer + UBSan and valgrind.
 
@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 from conftest import built_once
+from wide import WIDE
 
 from gyrogen.runtime.flags import C_STRICT, FORTRAN_STRICT
 from gyrogen.runtime.flags import C_WARNINGS as CXX_WARNINGS
@@ -159,6 +160,7 @@ SANITIZER_ENV = {"ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "halt_on_err
 
 
 @pytest.mark.parametrize("cc", ["gcc", "clang"])
+@WIDE
 def test_c_example_under_sanitizers(
     source_dir: Path, tmp_path_factory: pytest.TempPathFactory, tmp_path: Path, cc: str
 ) -> None:

@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 from ctrl_c import interrupted
 from sweep_cases import OBSTACLES, free_port, put, rows, small
+from wide import WIDE
 
 from gyrogen import api
 from gyrogen.analysis.sweep.draws import inputs
@@ -43,6 +44,7 @@ def swept(tmp_path_factory: pytest.TempPathFactory, cache: None, cli) -> tuple[P
 
 
 @pytest.mark.slow
+@WIDE
 def test_rows_are_the_compiled_integrator_run_directly(swept: tuple[Path, Path]) -> None:
     path, out = swept
     spec, frame = load(str(path)), rows(out)
@@ -303,6 +305,7 @@ def test_a_port_out_of_range_is_a_usage_error(tmp_path: Path, cli, port: str) ->
 
 
 @pytest.mark.slow
+@WIDE
 def test_a_server_that_is_not_dask_is_one_line_in_bounded_time(
     tmp_path: Path, cache: None, cli
 ) -> None:
@@ -367,6 +370,7 @@ def test_without_plots_a_figures_place_is_no_obstacle(
 
 @pytest.mark.slow
 @pytest.mark.parametrize("size", [0, 100])
+@WIDE
 def test_a_damaged_part_is_computed_again(
     swept: tuple[Path, Path], tmp_path: Path, cli, size: int
 ) -> None:
@@ -721,6 +725,7 @@ too); with I = 1e40 its momentum, 1e340, is beyond doubles."""
 @pytest.mark.slow  # a sweep of its own scene: its derivation and build
 @pytest.mark.filterwarnings("error")  # a numpy warning in a chunk fails the sweep
 @pytest.mark.parametrize("inertia", [0.02, 1e40])
+@WIDE
 def test_a_huge_start_rate_is_measured_without_overflow(
     tmp_path: Path, cache: None, cli, inertia: float
 ) -> None:

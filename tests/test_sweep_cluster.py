@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 from ctrl_c import interrupted
 from sweep_cases import long, rows
+from wide import WIDE
 
 from gyrogen.runtime.scene_build import builds
 
@@ -108,6 +109,7 @@ def _kill_when(parts: Path, count: int, proc: subprocess.Popen, seen: list[int])
         time.sleep(0.01)
 
 
+@WIDE
 def test_cluster_gives_the_local_rows_and_survives_a_killed_worker(
     tmp_path: Path, cluster: tuple[str, list[subprocess.Popen]], cli
 ) -> None:
@@ -134,6 +136,7 @@ def test_cluster_gives_the_local_rows_and_survives_a_killed_worker(
         assert list(client.run(builds).values()) == [[_build_id(local)]]
 
 
+@WIDE
 def test_two_clients_at_once_share_no_task(
     tmp_path: Path, cluster: tuple[str, list[subprocess.Popen]], cli
 ) -> None:
@@ -212,6 +215,7 @@ def _held(out: Path) -> dict[str, bytes | None]:
     ("form", "other"),
     [("dir", "dir"), ("file-url", "file-url"), ("file-url", "dir"), ("dir", "file-url")],
 )
+@WIDE
 def test_a_second_sweep_into_a_busy_out_is_refused(
     tmp_path: Path, cache: Path, form: str, other: str
 ) -> None:
@@ -252,6 +256,7 @@ def test_a_second_sweep_into_a_busy_out_is_refused(
 
 
 @pytest.mark.parametrize("form", ["dir", "file-url"])
+@WIDE
 def test_a_killed_sweep_does_not_hold_its_out(tmp_path: Path, cache: Path, form: str) -> None:
     """The first sweep SIGKILLed once it has written a part: its lock is no
     one's (a directory's flock, a file:// URL's too, ends with its process),
@@ -299,6 +304,7 @@ def test_memory_does_not_grow_with_the_number_of_chunks(tmp_path: Path, cache: P
     assert peak_kb < 600_000, peak_kb  # 185 MB measured; a list of 10^9 indices is 3 GB and more
 
 
+@WIDE
 def test_workers_write_their_parts_to_the_shared_path(
     tmp_path: Path,
     cluster: tuple[str, list[subprocess.Popen]],
@@ -343,6 +349,7 @@ def test_shared_is_for_a_scheduler(tmp_path: Path, cli) -> None:
     assert code == 2 and "--shared is for --scheduler" in err and not (tmp_path / "o").exists()
 
 
+@WIDE
 def test_workers_write_their_parts_to_a_file_url(
     tmp_path: Path,
     cluster: tuple[str, list[subprocess.Popen]],

@@ -1,4 +1,4 @@
-"""Issue 23, a sweep at scale: the summary streams over the parts (10^4 parts
+"""A sweep at scale: the summary streams over the parts (10^4 parts
 under `ulimit -n 256`), its median and p99 are numpy's exactly, another
 --chunk resumes the same sweep, the code is built for the workers' CPU,
 recorded, which a worker on another refuses (or portable for any), and the
@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sweep_cases import rows, small
+from wide import WIDE
 
 from gyrogen.analysis.sweep import columns as sweep_columns
 from gyrogen.analysis.sweep.columns import part_name, written
@@ -94,6 +95,7 @@ def _limited() -> None:
 
 
 @pytest.mark.slow
+@WIDE
 def test_ten_thousand_parts_are_summarized_under_256_files(
     tmp_path: Path, cache: Path, cli
 ) -> None:
@@ -158,6 +160,7 @@ def test_another_chunk_resumes_the_sweep(tmp_path: Path, cache: Path, cli) -> No
 
 
 @pytest.mark.slow
+@WIDE
 def test_sweeps_record_the_cpu_unless_portable(tmp_path: Path, cache: Path, cli) -> None:
     """By default the code is built for the workers' CPU (-march=native),
     which the identity records; --portable builds for any CPU (no

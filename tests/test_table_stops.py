@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.runtime.compiled import Compiled
 from gyrogen.runtime.scene_build import build_scene
@@ -78,6 +79,7 @@ def u4(scene: Scene) -> int:
 
 @pytest.mark.parametrize("language", ["c", "fortran"])
 @pytest.mark.parametrize("method", METHODS)
+@WIDE
 def test_the_pulse_is_felt_over_the_whole_span(
     pulse: tuple[Scene, dict[str, Compiled]], method: str, language: str
 ) -> None:

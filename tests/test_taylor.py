@@ -1,4 +1,4 @@
-"""The Taylor series integrator (issue 22): the scene's rhs as elementary
+"""The Taylor series integrator: the scene's rhs as elementary
 operations (gyrogen.symbolic.jet), its coefficients by the recurrences of
 automatic differentiation, printed once to C and Fortran
 (gyrogen.codegen.integrators.taylor). Against sympy's own series, a
@@ -14,6 +14,7 @@ import pytest
 import sympy as sm
 from sources import write_sources
 from test_integrators import tabled  # the wheel under a tabled torque
+from wide import WIDE
 
 from gyrogen import abi, methods
 from gyrogen.errors import GyrogenError, SceneError
@@ -67,6 +68,7 @@ def coefficients(
 
 
 @pytest.mark.slow
+@WIDE
 def test_the_recurrences_are_the_series_of_the_solution() -> None:
     """A small system with every operation: the recurrences' coefficients
     equal sympy's Taylor series of the exact solution's derivatives."""

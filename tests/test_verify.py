@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.oracle import reference, sampling
 from gyrogen.oracle.compare import TOLERANCE, compare, scaled_error
@@ -77,6 +78,7 @@ def test_single_state_matches_reference(backends: dict[str, Compiled]) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", builtin_names())
+@WIDE
 def test_verify_command_passes_on_every_builtin_scene(name: str, cli) -> None:
     """`gyrogen verify SCENE` as a user runs it (default counts): exit 0."""
     code, out, err = cli(["verify", name])

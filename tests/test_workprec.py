@@ -10,6 +10,7 @@ from pathlib import Path
 import matplotlib.image
 import numpy as np
 import pytest
+from wide import WIDE
 
 from gyrogen.analysis.bench import workprec
 from gyrogen.analysis.bench.workprec import Run
@@ -36,6 +37,7 @@ def test_anything_in_the_way_is_refused_before_measuring(
 
 
 @pytest.mark.slow
+@WIDE
 def test_bench_quick_default_scene(tmp_path: Path, cli) -> None:
     out = tmp_path / "report"
     code, text, _ = cli(["bench", "--quick", "--out", str(out)])
@@ -101,6 +103,7 @@ def test_scene_without_the_reference_integrator_is_one_line(tmp_path: Path, cli)
 
 
 @pytest.mark.slow
+@WIDE
 def test_failed_reference_run_is_one_line(
     tmp_path: Path,
     cli,

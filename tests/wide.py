@@ -1,13 +1,11 @@
-"""The mark of the cases past the suite's slice: each takes a path a kept
-case already takes, on another scene or build. The suite skips them;
-`make test-wide` (GYROGEN_WIDE=1) runs them."""
+"""The mark of the cases past the suite's slice (`@WIDE`, or `marks=WIDE` on
+one case of a parametrized test): each takes a path a kept case or a cheaper
+test already takes, on another scene, build or page, or at a size the suite
+cannot afford in its ten minutes. The suite deselects them (conftest.py);
+`make test-wide` (GYROGEN_WIDE=1, `-m wide`) runs them."""
 
 from __future__ import annotations
 
-import os
-
 import pytest
 
-WIDE = pytest.mark.skipif(
-    not os.environ.get("GYROGEN_WIDE"), reason="a further point of the same path: make test-wide"
-)
+WIDE = pytest.mark.wide

@@ -1,5 +1,5 @@
 """`gyrogen bench-ensemble`: the lane-batched ensembles and the single
-trajectory against numbalsoda and diffrax (issue 12's measurements)."""
+trajectory against numbalsoda and diffrax."""
 
 from __future__ import annotations
 

@@ -40,7 +40,7 @@ gcc 12's straight-line (SLP) vectorizer fuses a * b - c, a * b + c in
 neighbouring lanes into one vfmaddsub/vfmsubadd even under
 -ffp-contract=off, and only under some -march (Intel's and x86-64-v3, not
 znver3). Either made Fortran radau5 step differently from C on an Intel
-CPU (issue 19); loops are still vectorized, but a short loop with a
+CPU; loops are still vectorized, but a short loop with a
 constant count is unrolled whole first and then left scalar unless the
 description keeps it a loop (codegen.ir.nodes.For.vector)."""
 

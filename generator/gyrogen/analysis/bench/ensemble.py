@@ -1,6 +1,6 @@
 """Ensembles and the single trajectory, measured (gyrogen bench-ensemble).
 
-The problem is issue 12's: the default scene over 10 s from its
+The problem: the default scene over 10 s from its
 [simulate] state, errors against DOP853 in C at rtol = atol = 1e-13, with
 the scaled error of workprec (max |x - ref| / (1 + |ref|)). An ensemble
 perturbs u1..u3 by up to +-10 % (uniform, seeded). Every time is the best
@@ -93,7 +93,7 @@ def batch_us(prob: Problem, x0s: np.ndarray, tol: float, threads: int, repeats: 
 
 def loop_us(prob: Problem, x0s: np.ndarray, tol: float, repeats: int) -> float:
     """us per trajectory of a C loop of single-trajectory calls on one core
-    (the batch before issue 12; gyrogen_each in the cffi glue)."""
+    (what a batch replaces; gyrogen_each in the cffi glue)."""
     run = each_call(prob.comp, "dop853", x0s, prob.c, prob.t1, tol, MAX_STEPS)
     return best_time(run, repeats, min_total=0.05) / len(x0s) * 1e6
 
