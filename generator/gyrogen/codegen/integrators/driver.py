@@ -189,6 +189,17 @@ def lane_grid_locals(body: object) -> tuple[Decl, ...]:
     )
 
 
+def step_lanes(m: Method, body: tuple[S, ...], locals_: tuple[Decl, ...], grid: bool) -> Func:
+    """m's loop turned once on every lane: m.name_step_lanes, or with a grid
+    m.name_grid_step_lanes, its locals joined by the grid's (lane_grid_locals)."""
+    if grid:
+        locals_ += lane_grid_locals(body)
+        doc = (f"One turn of {m.name}_grid's loop on every lane.",)
+        return Func(f"{m.name}_grid_step_lanes", LANE_PARAMS, body, None, locals_, doc)
+    doc = (f"One turn of {m.name}_integrate's loop on every lane.",)
+    return Func(f"{m.name}_step_lanes", LANE_PARAMS, body, None, locals_, doc)
+
+
 def rows(name: str, count: int) -> Decl:
     """An interpolant's coefficients: count rows of NX."""
     return Decl(name, "double", (count, "NX"), "inout")

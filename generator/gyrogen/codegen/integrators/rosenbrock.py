@@ -422,12 +422,7 @@ def lanes_step(
     locals_ = (*(real(n, "inout") for n in doubles),
                *(Decl(n, "bool", (), "inout") for n in STEP_BOOLS),
                *driver.knot_locals(knots))  # fmt: skip
-    if grid:
-        locals_ += driver.lane_grid_locals(body)
-        doc = (f"One turn of {m.name}_grid's loop on every lane.",)
-        return Func(f"{m.name}_grid_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
-    doc = (f"One turn of {m.name}_integrate's loop on every lane.",)
-    return Func(f"{m.name}_step_lanes", driver.LANE_PARAMS, body, None, locals_, doc)
+    return driver.step_lanes(m, body, locals_, grid)
 
 
 def lane_state(m: Method, uses_time: bool) -> list[Decl]:
