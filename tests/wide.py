@@ -1,8 +1,9 @@
 """The mark of the cases past the suite's slice (`@WIDE`, or `marks=WIDE` on
-one case of a parametrized test): each takes a path a kept case or a cheaper
-test already takes, on another scene, build or page, or at a size the suite
-cannot afford in its ten minutes. The suite deselects them (conftest.py);
-`make test-wide` (GYROGEN_WIDE=1, `-m wide`) runs them."""
+one case of a parametrized test): a further scene, build or page on a path
+the suite takes, or a test that cost 20 s or more of a worker in a full run
+(ARCHITECTURE.md names the three the suite keeps whatever they cost). The
+suite deselects them (conftest.py); `make test-wide` (GYROGEN_WIDE=1,
+`-m wide`) runs them."""
 
 from __future__ import annotations
 
