@@ -55,7 +55,10 @@ C_KEYWORDS = {"auto", "break", "case", "char", "const", "continue", "default", "
               "switch", "typedef", "union", "unsigned", "void", "volatile", "while"}  # fmt: skip
 NAME = re.compile(r"[A-Za-z](?:[A-Za-z0-9]|_(?=[A-Za-z0-9]))*")
 """A valid scene name, written independently of scene.check_name."""
-C_STRICT = ["-std=c99", "-O2", *C_WARNINGS]
+C_STRICT = ["-std=c99", "-O2", *C_WARNINGS, "-fsyntax-only"]
+"""clang's warnings come from its front end: checked without its code
+generation (-O2 kept for what the headers see: __OPTIMIZE__), 0.1 s a file
+instead of 8 s for the default scene's integrators."""
 
 
 @dataclass(frozen=True)
@@ -331,7 +334,7 @@ def _pipeline(scene: Scene) -> None:
             long = [n for n, line in enumerate(f.read_text().splitlines(), 1) if len(line) > 132]
             assert not long, f"{f.name}: lines {long[:5]} past 132 columns"
         for c_file in src.glob("*.c"):
-            _compile(["clang", *C_STRICT, "-c", c_file.name, "-o", "clang.o"], src)
+            _compile(["clang", *C_STRICT, c_file.name], src)
         backends = [build.build(src, lang) for lang in scene.targets]  # gcc, gfortran, -Werror
         given = compare.given_parameters(scene)
         report = compare.compare(backends, scene, 100, 2, 1, seed=0, given=given)
