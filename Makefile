@@ -56,7 +56,7 @@ test: setup lint
 ## generated, compiled as C and Fortran and checked against the reference); its build cache is kept
 ## in .cache/test-fast (entries named by the hash of what built them), so a run compiles only what
 ## changed, at -O3: built once, the faster code pays off in every run (the whole suite, whose cache
-## is new each run, builds at -O2)
+## is new each run, builds at -O1)
 test-fast: setup lint
 	GYROGEN_OPT_LEVEL=$${GYROGEN_OPT_LEVEL:-3} GYROGEN_TEST_CACHE=$(CURDIR)/.cache/test-fast \
 	  $(BIN)/python -m pytest -m "not slow"
@@ -78,12 +78,18 @@ docs-bench: setup
 ## generate: rewrite generated/ (every built-in scene) from the templates and the generator
 generate: setup
 	$(BIN)/gyrogen generate --all --lib --out generated
+	$(RENDERED_BY) > generated/RENDERED_BY.tmp && mv generated/RENDERED_BY.tmp generated/RENDERED_BY
 
 ## check-generated: fail if generated/ differs from a fresh rendering
 check-generated: setup
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
 	$(BIN)/gyrogen generate --all --lib --out "$$tmp" >/dev/null 2>&1 && \
+	$(RENDERED_BY) > "$$tmp/RENDERED_BY" && \
 	diff -r "$$tmp" generated && echo "generated/ is up to date"
+
+# what generated/ is rendered from (runtime/scene_build.py's rendered_by): the suite reads it
+RENDERED_BY = $(BIN)/python -c 'from gyrogen.runtime.scene_build import rendered_by; \
+  from gyrogen.scene import builtin_names, load; print(rendered_by(map(load, builtin_names())))'
 
 ## bench: RHS timings (cffi, batched C and Fortran, numpy, PyDy cython)
 bench: setup

@@ -137,6 +137,17 @@ def rendering_digest() -> str:
     return _digest(root, sorted(kept))
 
 
+def rendered_by(scenes: Iterable[Scene]) -> str:
+    """What scenes' sources are rendered from: the code rendering runs
+    (rendering_digest), sympy's version and the scenes themselves.
+    generated/RENDERED_BY holds the built-in scenes' (`make generate` writes
+    it): while it equals this, generated/ is what a rendering would write,
+    and the suite knows so without rendering every scene."""
+    dumped = [scene.model_dump(mode="json") for scene in scenes]
+    text = json.dumps([dumped, rendering_digest(), version("sympy")], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
 def _stored(scene: Scene) -> Path:
     """Where the scene's rendered sources are kept: the build cache's
     sources/, keyed by the scene, the code that renders it and sympy's version."""
