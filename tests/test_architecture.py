@@ -122,16 +122,16 @@ def test_no_import_cycle() -> None:
 
 
 def test_running_compiled_code_never_imports_sympy() -> None:
-    """runtime/ and what a sweep worker imports need no sympy (it cost every
-    process 0.8 s of imports): a new interpreter imports them, and sympy is
-    not among its modules."""
+    """runtime/, what a sweep worker imports and verify's comparison need no
+    sympy (it cost every process 0.8 s of imports): a new interpreter
+    imports them, and sympy is not among its modules."""
     import subprocess
     import sys
 
     code = (
         "import sys, gyrogen.runtime.build, gyrogen.runtime.compiled, gyrogen.runtime.rhs, "
         "gyrogen.runtime.segment, gyrogen.runtime.scene_build, "
-        "gyrogen.analysis.sweep.engine; "
+        "gyrogen.analysis.sweep.engine, gyrogen.oracle.compare, gyrogen.commands.verify; "
         "print('sympy' in sys.modules)"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

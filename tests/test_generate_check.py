@@ -120,6 +120,9 @@ def test_jacobian_error_catches_a_wrong_entry(controlled) -> None:  # type: igno
     x = scene_view.random_states(scene, rng, 20)
     c = comp.setup(p)
     jac = np.array([comp.jacobian(xi, c) for xi in x])
+    assert np.array_equal(comp.jacobians(x, c), jac)  # the check's one call: the same numbers
+    with pytest.raises(ValueError, match=r"states must have shape \(n, 8\)"):
+        comp.jacobians(x[0], c)
     f = lambda xs, q: scene_view.rhs(scene, xs, q)  # noqa: E731
     assert compare.jacobian_error(jac, f, x, p) < 1e-7
     jac[:, 5, 6] *= 1.001

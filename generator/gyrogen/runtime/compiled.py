@@ -457,13 +457,46 @@ class Compiled:
         >>> model.jacobian(np.zeros(model.nx), model.setup([])).shape
         (7, 7)
         """
+        self._has_jacobian()
+        x = self._vector(x, self.nx, "the state x (one state)")
+        return self._apply("jac", self.nx * self.nx, x, c, t).reshape(self.nx, self.nx)
+
+    def jacobians(self, x: np.ndarray, c: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """The Jacobian of the right-hand side at many states, in one call.
+
+        Parameters
+        ----------
+        x : array_like, shape (n, nx)
+            The states.
+        c : array_like, shape (nc,)
+            The constants from `setup`.
+        t : float, default 0.0
+            The time.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n, nx, nx)
+            Row k is `jacobian` at x[k], the same numbers.
+
+        Raises
+        ------
+        BuildError
+            The scene compiled no Jacobian.
+        ValueError
+            x or c has the wrong shape.
+        """
+        self._has_jacobian()
+        x = self._states(x)
+        if x.ndim != 2:
+            raise ValueError(f"states must have shape (n, {self.nx}), not {x.shape}")
+        return self._apply("jac", self.nx * self.nx, x, c, t).reshape(-1, self.nx, self.nx)
+
+    def _has_jacobian(self) -> None:
         if "jac" not in self.manifest["functions"][self.language]:
             raise BuildError(
                 f"scene {self.manifest['prefix']} has no Jacobian (add one of "
                 f"{', '.join(methods.IMPLICIT)} to its integrators)"
             )
-        x = self._vector(x, self.nx, "the state x (one state)")
-        return self._apply("jac", self.nx * self.nx, x, c, t).reshape(self.nx, self.nx)
 
     def _apply(self, name: str, size: int, x: np.ndarray, c: np.ndarray, t: float) -> np.ndarray:
         x = self._states(x).reshape(-1, self.nx)

@@ -310,13 +310,32 @@ class Comment(S):
 
 
 def walk(node: E | S) -> Iterator[E | S]:
-    """node and every expression and statement within it, in order."""
-    yield node
-    for f in fields(node):
-        value = getattr(node, f.name)
-        for x in value if isinstance(value, tuple) else (value,):
-            if isinstance(x, (E, S)):
-                yield from walk(x)
+    """node and every expression and statement within it, in order (each
+    node before what it holds, its fields in order), by a stack of what is
+    left: a function's body is hundreds of thousands of nodes."""
+    left: list[E | S] = [node]
+    while left:
+        x = left.pop()
+        yield x
+        inner: list[E | S] = []
+        for name in _field_names(type(x)):
+            value = getattr(x, name)
+            if isinstance(value, tuple):
+                inner += [v for v in value if isinstance(v, (E, S))]
+            elif isinstance(value, (E, S)):
+                inner.append(value)
+        left += reversed(inner)
+
+
+_FIELDS: dict[type, tuple[str, ...]] = {}
+
+
+def _field_names(kind: type) -> tuple[str, ...]:
+    """A node class's field names, in order (dataclasses.fields: a call each)."""
+    names = _FIELDS.get(kind)
+    if names is None:
+        names = _FIELDS[kind] = tuple(f.name for f in fields(kind))
+    return names
 
 
 Node = TypeVar("Node")
