@@ -31,13 +31,11 @@ def cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     one): the same sources are compiled once per run. GYROGEN_TEST_CACHE
     names one kept from run to run instead (`make test-fast`'s): an entry's
     name is the hash of what built it, so a run takes from it only what it
-    would have built the same."""
+    would have built the same. Either way it starts with the built-in
+    scenes' sources (seed_sources)."""
     kept = os.environ.get("GYROGEN_TEST_CACHE")
-    if kept:
-        Path(kept).mkdir(parents=True, exist_ok=True)
-        return Path(kept)
-    cache = shared_dir(tmp_path_factory) / "cache"
-    cache.mkdir(exist_ok=True)
+    cache = Path(kept) if kept else shared_dir(tmp_path_factory) / "cache"
+    cache.mkdir(parents=True, exist_ok=True)
     built_once(tmp_path_factory, "sources-seeded", lambda _: seed_sources(cache))
     return cache
 
