@@ -76,8 +76,8 @@ BUILD_LEVEL = "1"
 the run sets it, as `make test-fast` does: -O3, its cache being kept): the
 same bits as -O3. gcc 12 compiled the default scene's integrators in 4.4 s
 of CPU at -O1 against 7.2 s at -O2 (gfortran 2.4 s against 4.2 s), and the
-code ran as fast (dop853, taylor, radau5, rodas4 and rk4 within 15 %);
--O0 compiles in 1.2 s but runs 3-5 times slower. The default scene's
+code ran about as fast (dop853, taylor, rodas4 and rk4 within 15 %, radau5
+30 % slower); -O0 compiles in 1.2 s but runs 3-5 times slower. The default scene's
 backends are built at -O3, the level users run."""
 
 
