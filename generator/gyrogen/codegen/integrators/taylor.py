@@ -144,15 +144,16 @@ def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
     never computed)."""
     deg = jet.degrees()
 
-    def points(tau: E, at: Callable[[E], At]) -> list[S]:
+    def points(tau: E, at: Callable[[E], At], only: tuple[int, ...] = ()) -> list[S]:
         acc, q = Var("acc"), Var("q")
+        skip = sorted(set(exact) | (set(range(jet.nx)) - set(only) if only else set()))
         out: list[S] = [
-            *_over(jet.nx, exact, assign(acc[i], T[order, i])),
-            For("q", order - 1, tuple(_over(jet.nx, exact, assign(
+            *_over(jet.nx, skip, assign(acc[i], T[order, i])),
+            For("q", order - 1, tuple(_over(jet.nx, skip, assign(
                 acc[i], T[order - Int(1) - q, i] + tau * acc[i])))),
-            *_over(jet.nx, exact, assign(at(i), x[i] + tau * acc[i])),
+            *_over(jet.nx, skip, assign(at(i), x[i] + tau * acc[i])),
         ]  # fmt: skip
-        for n in exact:
+        for n in (n for n in exact if not only or n in only):
             low = T[Int(1), Int(n)] + tau * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
             out.append(assign(at(Int(n)), x[Int(n)] + tau * low))
         return out
@@ -304,13 +305,7 @@ def _over(n: int, left_out: list[int], *body: S) -> list[S]:
 
 def _runs(n: int, left_out: list[int]) -> list[tuple[int, int]]:
     """The runs [a, b) of 0 .. n-1 without left_out."""
-    out: list[tuple[int, int]] = []
-    for k in (k for k in range(n) if k not in left_out):
-        if out and out[-1][1] == k:
-            out[-1] = (out[-1][0], k + 1)
-        else:
-            out.append((k, k + 1))
-    return out
+    return driver.spans([k for k in range(n) if k not in left_out])
 
 
 def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False) -> Func:
