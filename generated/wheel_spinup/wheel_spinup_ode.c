@@ -2484,7 +2484,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                 ev_dt = ev_cap;
                 ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
                 if (L->ev_dold[0][l] < 0.0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = L->x[i][l] + ev_del * L->k[0][i][l];
                     }
                     wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
@@ -2495,7 +2495,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                         L->ev_dold[ev_k][l] = ev_dnew[ev_k];
                     }
                 }
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                for (i = 7; i < 8; ++i) {
                     ev_y[i] = L->xnew[i][l] + -ev_del * L->k[6][i][l];
                 }
                 wheel_spinup_events(L->t[l] + -ev_del, ev_y, c, ev_g);
@@ -2585,7 +2585,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                         ev_last = 1;
                     }
                     if (ev_last == 0) {
-                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        for (i = 7; i < 8; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
                                     + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
                                     (ev_tb - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
@@ -2595,7 +2595,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = ev_g[ev_k];
                         }
-                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        for (i = 7; i < 8; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
                                     (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) /
                                     hs[l]) * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) /
@@ -2663,7 +2663,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                 if (!(ev_m > ev_a && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                             (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
                                             * (L->dense[1][i][l] + (ev_m - told[l]) / hs[l] *
@@ -2706,7 +2706,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                     if (!(ev_m > ev_f && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                 (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) /
                                                 hs[l]) * (L->dense[1][i][l] + (ev_m - told[l]) /
@@ -2747,7 +2747,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -2792,7 +2792,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                         if (!(ev_m > ev_a && ev_m < ev_f)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -2835,7 +2835,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                                 break;
                                             }
-                                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            for (i = 7; i < 8; ++i) {
                                                 ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                         (L->dense[0][i][l] + (1.0 - (ev_m -
                                                         told[l]) / hs[l]) * (L->dense[1][i][l] +
@@ -4183,7 +4183,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                 ev_dt = ev_cap;
                 ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
                 if (L->ev_dold[0][l] < 0.0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = L->x[i][l] + ev_del * L->k[0][i][l];
                     }
                     wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
@@ -4194,7 +4194,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                         L->ev_dold[ev_k][l] = ev_dnew[ev_k];
                     }
                 }
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                for (i = 7; i < 8; ++i) {
                     ev_y[i] = L->xnew[i][l] + -ev_del * L->k[12][i][l];
                 }
                 wheel_spinup_events(L->t[l] + -ev_del, ev_y, c, ev_g);
@@ -4366,7 +4366,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                         ev_last = 1;
                     }
                     if (ev_last == 0) {
-                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        for (i = 7; i < 8; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
                                     + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
                                     (ev_tb - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
@@ -4379,7 +4379,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = ev_g[ev_k];
                         }
-                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        for (i = 7; i < 8; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
                                     (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) /
                                     hs[l]) * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) /
@@ -4450,7 +4450,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                 if (!(ev_m > ev_a && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                             (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
                                             * (L->dense[1][i][l] + (ev_m - told[l]) / hs[l] *
@@ -4496,7 +4496,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                     if (!(ev_m > ev_f && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                 (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) /
                                                 hs[l]) * (L->dense[1][i][l] + (ev_m - told[l]) /
@@ -4540,7 +4540,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -4589,7 +4589,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                         if (!(ev_m > ev_a && ev_m < ev_f)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -4636,7 +4636,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                                 break;
                                             }
-                                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            for (i = 7; i < 8; ++i) {
                                                 ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                         (L->dense[0][i][l] + (1.0 - (ev_m -
                                                         told[l]) / hs[l]) * (L->dense[1][i][l] +
@@ -7282,7 +7282,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
             ev_dt = ev_cap;
             ev_del = (t - told) * 1.52587890625e-05;
             if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                for (i = 7; i < 8; ++i) {
                     ev_y[i] = x[i] + ev_del * k[0][i];
                 }
                 wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
@@ -7293,7 +7293,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                     ev_dold[ev_k] = ev_dnew[ev_k];
                 }
             }
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            for (i = 7; i < 8; ++i) {
                 ev_y[i] = xnew[i] + -ev_del * k[6][i];
             }
             wheel_spinup_events(t + -ev_del, ev_y, c, ev_g);
@@ -7367,7 +7367,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
                                 told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
                                 (1.0 - (ev_tb - told) / hs) * dense[3][i])));
@@ -7376,7 +7376,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 -
                                 (ev_tb + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del
                                 - told) / hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) /
@@ -7441,7 +7441,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 - (ev_m
                                         - told) / hs) * (dense[1][i] + (ev_m - told) / hs *
                                         (dense[2][i] + (1.0 - (ev_m - told) / hs) * dense[3][i])));
@@ -7481,7 +7481,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 -
                                             (ev_m - told) / hs) * (dense[1][i] + (ev_m - told) /
                                             hs * (dense[2][i] + (1.0 - (ev_m - told) / hs) *
@@ -7520,7 +7520,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -7563,7 +7563,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -7602,7 +7602,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] +
                                                     (1.0 - (ev_m - told) / hs) * (dense[1][i] +
                                                     (ev_m - told) / hs * (dense[2][i] + (1.0 -
@@ -8708,7 +8708,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
             ev_dt = ev_cap;
             ev_del = (t - told) * 1.52587890625e-05;
             if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                for (i = 7; i < 8; ++i) {
                     ev_y[i] = x[i] + ev_del * k[0][i];
                 }
                 wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
@@ -8719,7 +8719,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                     ev_dold[ev_k] = ev_dnew[ev_k];
                 }
             }
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            for (i = 7; i < 8; ++i) {
                 ev_y[i] = xnew[i] + -ev_del * k[12][i];
             }
             wheel_spinup_events(t + -ev_del, ev_y, c, ev_g);
@@ -8837,7 +8837,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
                                 told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
                                 (1.0 - (ev_tb - told) / hs) * (dense[3][i] + (ev_tb - told) / hs
@@ -8848,7 +8848,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 -
                                 (ev_tb + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del
                                 - told) / hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) /
@@ -8915,7 +8915,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 - (ev_m
                                         - told) / hs) * (dense[1][i] + (ev_m - told) / hs *
                                         (dense[2][i] + (1.0 - (ev_m - told) / hs) * (dense[3][i]
@@ -8958,7 +8958,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 -
                                             (ev_m - told) / hs) * (dense[1][i] + (ev_m - told) /
                                             hs * (dense[2][i] + (1.0 - (ev_m - told) / hs) *
@@ -8999,7 +8999,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -9045,7 +9045,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -9087,7 +9087,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] +
                                                     (1.0 - (ev_m - told) / hs) * (dense[1][i] +
                                                     (ev_m - told) / hs * (dense[2][i] + (1.0 -
@@ -10015,7 +10015,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
             ev_dt = ev_cap;
             ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
             if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                for (i = 7; i < 8; ++i) {
                     ev_y[i] = x[i] * (1.0 - (t + ev_del - t) / h) + (t + ev_del - t) / h *
                             (xnew[i] + (1.0 - (t + ev_del - t) / h) * (dense[0][i] + (t + ev_del
                             - t) / h * dense[1][i]));
@@ -10028,7 +10028,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                     ev_dold[ev_k] = ev_dnew[ev_k];
                 }
             }
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            for (i = 7; i < 8; ++i) {
                 ev_y[i] = x[i] * (1.0 - ((last ? t1 : t + h) + -ev_del - t) / h) + ((last ? t1 :
                         t + h) + -ev_del - t) / h * (xnew[i] + (1.0 - ((last ? t1 : t + h) +
                         -ev_del - t) / h) * (dense[0][i] + ((last ? t1 : t + h) + -ev_del - t) /
@@ -10061,7 +10061,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] * (1.0 - (ev_tb - t) / h) + (ev_tb - t) / h * (xnew[i] +
                                 (1.0 - (ev_tb - t) / h) * (dense[0][i] + (ev_tb - t) / h *
                                 dense[1][i]));
@@ -10070,7 +10070,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] * (1.0 - (ev_tb + -ev_del - t) / h) + (ev_tb + -ev_del -
                                 t) / h * (xnew[i] + (1.0 - (ev_tb + -ev_del - t) / h) *
                                 (dense[0][i] + (ev_tb + -ev_del - t) / h * dense[1][i]));
@@ -10134,7 +10134,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h *
                                         (xnew[i] + (1.0 - (ev_m - t) / h) * (dense[0][i] + (ev_m
                                         - t) / h * dense[1][i]));
@@ -10174,7 +10174,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h *
                                             (xnew[i] + (1.0 - (ev_m - t) / h) * (dense[0][i] +
                                             (ev_m - t) / h * dense[1][i]));
@@ -10212,7 +10212,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h
                                                 * (xnew[i] + (1.0 - (ev_m - t) / h) *
                                                 (dense[0][i] + (ev_m - t) / h * dense[1][i]));
@@ -10254,7 +10254,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h
                                                 * (xnew[i] + (1.0 - (ev_m - t) / h) *
                                                 (dense[0][i] + (ev_m - t) / h * dense[1][i]));
@@ -10292,7 +10292,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t)
                                                     / h * (xnew[i] + (1.0 - (ev_m - t) / h) *
                                                     (dense[0][i] + (ev_m - t) / h * dense[1][i]));
@@ -11746,7 +11746,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
             ev_dt = ev_cap;
             ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
             if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                for (i = 7; i < 8; ++i) {
                     ev_y[i] = xnew[i] + (t + ev_del - (last ? t1 : t + h)) / h * (ak1[i] + ((t +
                             ev_del - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
                             ((t + ev_del - (last ? t1 : t + h)) / h + 0.8449489742783178) *
@@ -11760,7 +11760,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                     ev_dold[ev_k] = ev_dnew[ev_k];
                 }
             }
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            for (i = 7; i < 8; ++i) {
                 ev_y[i] = xnew[i] + ((last ? t1 : t + h) + -ev_del - (last ? t1 : t + h)) / h *
                         (ak1[i] + (((last ? t1 : t + h) + -ev_del - (last ? t1 : t + h)) / h +
                         0.35505102572168223) * (ak2[i] + (((last ? t1 : t + h) + -ev_del - (last
@@ -11793,7 +11793,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = xnew[i] + (ev_tb - (last ? t1 : t + h)) / h * (ak1[i] + ((ev_tb
                                 - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
                                 ((ev_tb - (last ? t1 : t + h)) / h + 0.8449489742783178) * ak3[i]));
@@ -11802,7 +11802,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = xnew[i] + (ev_tb + -ev_del - (last ? t1 : t + h)) / h * (ak1[i]
                                 + ((ev_tb + -ev_del - (last ? t1 : t + h)) / h +
                                 0.35505102572168223) * (ak2[i] + ((ev_tb + -ev_del - (last ? t1 :
@@ -11867,7 +11867,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h * (ak1[i] +
                                         ((ev_m - (last ? t1 : t + h)) / h + 0.35505102572168223)
                                         * (ak2[i] + ((ev_m - (last ? t1 : t + h)) / h +
@@ -11908,7 +11908,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
                                             (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
                                             0.35505102572168223) * (ak2[i] + ((ev_m - (last ? t1
@@ -11947,7 +11947,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
                                                 (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
                                                 0.35505102572168223) * (ak2[i] + ((ev_m - (last ?
@@ -11990,7 +11990,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
                                                 (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
                                                 0.35505102572168223) * (ak2[i] + ((ev_m - (last ?
@@ -12029,7 +12029,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h
                                                     * (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h
                                                     + 0.35505102572168223) * (ak2[i] + ((ev_m -
@@ -13782,16 +13782,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
             ev_dt = ev_cap;
             ev_del = (t - told) * 1.52587890625e-05;
             if (ev_dold[0] < 0.0) {
-                for (i = 0; i < 7; ++i) {
-                    acc[i] = tay[order][i];
-                }
                 for (q = 0; q < order - 1; ++q) {
-                    for (i = 0; i < 7; ++i) {
-                        acc[i] = tay[order - 1 - q][i] + (told + ev_del - told) * acc[i];
-                    }
-                }
-                for (i = 0; i < 7; ++i) {
-                    ev_y[i] = x[i] + (told + ev_del - told) * acc[i];
                 }
                 ev_y[7] = x[7] + (told + ev_del - told) * tay[1][7];
                 wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
@@ -13802,16 +13793,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                     ev_dold[ev_k] = ev_dnew[ev_k];
                 }
             }
-            for (i = 0; i < 7; ++i) {
-                acc[i] = tay[order][i];
-            }
             for (q = 0; q < order - 1; ++q) {
-                for (i = 0; i < 7; ++i) {
-                    acc[i] = tay[order - 1 - q][i] + (t + -ev_del - told) * acc[i];
-                }
-            }
-            for (i = 0; i < 7; ++i) {
-                ev_y[i] = x[i] + (t + -ev_del - told) * acc[i];
             }
             ev_y[7] = x[7] + (t + -ev_del - told) * tay[1][7];
             wheel_spinup_events(t + -ev_del, ev_y, c, ev_g);
@@ -13841,32 +13823,14 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < 7; ++i) {
-                        acc[i] = tay[order][i];
-                    }
                     for (q = 0; q < order - 1; ++q) {
-                        for (i = 0; i < 7; ++i) {
-                            acc[i] = tay[order - 1 - q][i] + (ev_tb - told) * acc[i];
-                        }
-                    }
-                    for (i = 0; i < 7; ++i) {
-                        ev_y[i] = x[i] + (ev_tb - told) * acc[i];
                     }
                     ev_y[7] = x[7] + (ev_tb - told) * tay[1][7];
                     wheel_spinup_events(ev_tb, ev_y, c, ev_g);
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
-                    for (i = 0; i < 7; ++i) {
-                        acc[i] = tay[order][i];
-                    }
                     for (q = 0; q < order - 1; ++q) {
-                        for (i = 0; i < 7; ++i) {
-                            acc[i] = tay[order - 1 - q][i] + (ev_tb + -ev_del - told) * acc[i];
-                        }
-                    }
-                    for (i = 0; i < 7; ++i) {
-                        ev_y[i] = x[i] + (ev_tb + -ev_del - told) * acc[i];
                     }
                     ev_y[7] = x[7] + (ev_tb + -ev_del - told) * tay[1][7];
                     wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
@@ -13928,16 +13892,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < 7; ++i) {
-                                acc[i] = tay[order][i];
-                            }
                             for (q = 0; q < order - 1; ++q) {
-                                for (i = 0; i < 7; ++i) {
-                                    acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                }
-                            }
-                            for (i = 0; i < 7; ++i) {
-                                ev_y[i] = x[i] + (ev_m - told) * acc[i];
                             }
                             ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                             wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -13975,16 +13930,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < 7; ++i) {
-                                    acc[i] = tay[order][i];
-                                }
                                 for (q = 0; q < order - 1; ++q) {
-                                    for (i = 0; i < 7; ++i) {
-                                        acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                    }
-                                }
-                                for (i = 0; i < 7; ++i) {
-                                    ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                 }
                                 ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                 wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -14020,16 +13966,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < 7; ++i) {
-                                        acc[i] = tay[order][i];
-                                    }
                                     for (q = 0; q < order - 1; ++q) {
-                                        for (i = 0; i < 7; ++i) {
-                                            acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                        }
-                                    }
-                                    for (i = 0; i < 7; ++i) {
-                                        ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                     }
                                     ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                     wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -14069,16 +14006,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < 7; ++i) {
-                                        acc[i] = tay[order][i];
-                                    }
                                     for (q = 0; q < order - 1; ++q) {
-                                        for (i = 0; i < 7; ++i) {
-                                            acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                        }
-                                    }
-                                    for (i = 0; i < 7; ++i) {
-                                        ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                     }
                                     ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                     wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -14114,17 +14042,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < 7; ++i) {
-                                            acc[i] = tay[order][i];
-                                        }
                                         for (q = 0; q < order - 1; ++q) {
-                                            for (i = 0; i < 7; ++i) {
-                                                acc[i] = tay[order - 1 - q][i] + (ev_m - told) *
-                                                        acc[i];
-                                            }
-                                        }
-                                        for (i = 0; i < 7; ++i) {
-                                            ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                         }
                                         ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                         wheel_spinup_events(ev_m, ev_y, c, ev_g);

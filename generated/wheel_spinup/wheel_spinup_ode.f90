@@ -2120,7 +2120,7 @@ contains
         ev_dt = ev_cap
         ev_del = (t - told) * 1.52587890625e-05_c_double
         if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
+          do i = 7, 8 - 1
             ev_y(i) = x(i) + ev_del * k(i, 0)
           end do
           call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
@@ -2131,7 +2131,7 @@ contains
             ev_dold(ev_k) = ev_dnew(ev_k)
           end do
         end if
-        do i = 0, nx - 1
+        do i = 7, 8 - 1
           ev_y(i) = xnew(i) + (-ev_del) * k(i, 6)
         end do
         call wheel_spinup_events(t + (-ev_del), ev_y, c, ev_g)
@@ -2209,7 +2209,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
                   1) + ((ev_tb - told) / hs) * (dense(i, &
@@ -2219,7 +2219,7 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
                   1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
@@ -2287,7 +2287,7 @@ contains
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                       0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                       1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2328,7 +2328,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                         0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                         1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2368,7 +2368,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2410,7 +2410,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2450,7 +2450,7 @@ contains
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                             0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                             1) + ((ev_m - told) / hs) * (dense(i, &
@@ -3688,7 +3688,7 @@ contains
         ev_dt = ev_cap
         ev_del = (t - told) * 1.52587890625e-05_c_double
         if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
+          do i = 7, 8 - 1
             ev_y(i) = x(i) + ev_del * k(i, 0)
           end do
           call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
@@ -3699,7 +3699,7 @@ contains
             ev_dold(ev_k) = ev_dnew(ev_k)
           end do
         end if
-        do i = 0, nx - 1
+        do i = 7, 8 - 1
           ev_y(i) = xnew(i) + (-ev_del) * k(i, 12)
         end do
         call wheel_spinup_events(t + (-ev_del), ev_y, c, ev_g)
@@ -3835,7 +3835,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
                   1) + ((ev_tb - told) / hs) * (dense(i, &
@@ -3848,7 +3848,7 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
                   1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
@@ -3919,7 +3919,7 @@ contains
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                       0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                       1) + ((ev_m - told) / hs) * (dense(i, &
@@ -3963,7 +3963,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                         0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                         1) + ((ev_m - told) / hs) * (dense(i, &
@@ -4006,7 +4006,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -4051,7 +4051,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -4094,7 +4094,7 @@ contains
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                             0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                             1) + ((ev_m - told) / hs) * (dense(i, &
@@ -5157,7 +5157,7 @@ contains
         ev_dt = ev_cap
         ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
         if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
+          do i = 7, 8 - 1
             ev_y(i) = x(i) * (1.0_c_double - ((t + ev_del) - t) / h) + (((t + ev_del) - t) / h) * &
                 (xnew(i) + (1.0_c_double - ((t + ev_del) - t) / h) * (dense(i, &
                 0) + (((t + ev_del) - t) / h) * dense(i, 1)))
@@ -5170,7 +5170,7 @@ contains
             ev_dold(ev_k) = ev_dnew(ev_k)
           end do
         end if
-        do i = 0, nx - 1
+        do i = 7, 8 - 1
           ev_y(i) = x(i) * (1.0_c_double - (((merge(t1, t + h, &
               last)) + (-ev_del)) - t) / h) + ((((merge(t1, t + h, &
               last)) + (-ev_del)) - t) / h) * (xnew(i) + (1.0_c_double - (((merge(t1, t + h, &
@@ -5204,7 +5204,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) * (1.0_c_double - (ev_tb - t) / h) + ((ev_tb - t) / h) * (xnew(i) + &
                   (1.0_c_double - (ev_tb - t) / h) * (dense(i, 0) + ((ev_tb - t) / h) * dense(i, &
                   1)))
@@ -5213,7 +5213,7 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) * (1.0_c_double - ((ev_tb + (-ev_del)) - t) / h) + (((ev_tb + &
                   (-ev_del)) - t) / h) * (xnew(i) + (1.0_c_double - ((ev_tb + (-ev_del)) - t) / &
                   h) * (dense(i, 0) + (((ev_tb + (-ev_del)) - t) / h) * dense(i, 1)))
@@ -5281,7 +5281,7 @@ contains
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * (xnew(i) &
                       + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                       0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5321,7 +5321,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                         (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                         0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5360,7 +5360,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                           (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                           0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5401,7 +5401,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                           (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                           0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5440,7 +5440,7 @@ contains
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                             (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                             0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -7061,7 +7061,7 @@ contains
         ev_dt = ev_cap
         ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
         if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
+          do i = 7, 8 - 1
             ev_y(i) = xnew(i) + (((t + ev_del) - (merge(t1, t + h, &
                 last))) / h) * (ak1(i) + (((t + ev_del) - (merge(t1, t + h, &
                 last))) / h + 0.35505102572168223_c_double) * (ak2(i) + (((t + ev_del) - &
@@ -7075,7 +7075,7 @@ contains
             ev_dold(ev_k) = ev_dnew(ev_k)
           end do
         end if
-        do i = 0, nx - 1
+        do i = 7, 8 - 1
           ev_y(i) = xnew(i) + ((((merge(t1, t + h, last)) + (-ev_del)) - (merge(t1, t + h, &
               last))) / h) * (ak1(i) + ((((merge(t1, t + h, last)) + (-ev_del)) - (merge(t1, &
               t + h, last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((((merge(t1, t + h, &
@@ -7109,7 +7109,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = xnew(i) + ((ev_tb - (merge(t1, t + h, &
                   last))) / h) * (ak1(i) + ((ev_tb - (merge(t1, t + h, &
                   last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_tb - (merge(t1, &
@@ -7119,7 +7119,7 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = xnew(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
                   last))) / h) * (ak1(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
                   last))) / h + 0.35505102572168223_c_double) * (ak2(i) + (((ev_tb + (-ev_del)) - &
@@ -7188,7 +7188,7 @@ contains
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                       last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                       last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - (merge(t1, &
@@ -7229,7 +7229,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                         last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                         last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -7269,7 +7269,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -7311,7 +7311,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -7351,7 +7351,7 @@ contains
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                             last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                             last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -9226,16 +9226,7 @@ contains
         ev_dt = ev_cap
         ev_del = (t - told) * 1.52587890625e-05_c_double
         if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, 7 - 1
-            acc(i) = tay(i, order)
-          end do
           do q = 0, order - 1 - 1
-            do i = 0, 7 - 1
-              acc(i) = tay(i, (order - 1) - q) + ((told + ev_del) - told) * acc(i)
-            end do
-          end do
-          do i = 0, 7 - 1
-            ev_y(i) = x(i) + ((told + ev_del) - told) * acc(i)
           end do
           ev_y(7) = x(7) + ((told + ev_del) - told) * tay(7, 1)
           call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
@@ -9246,16 +9237,7 @@ contains
             ev_dold(ev_k) = ev_dnew(ev_k)
           end do
         end if
-        do i = 0, 7 - 1
-          acc(i) = tay(i, order)
-        end do
         do q = 0, order - 1 - 1
-          do i = 0, 7 - 1
-            acc(i) = tay(i, (order - 1) - q) + ((t + (-ev_del)) - told) * acc(i)
-          end do
-        end do
-        do i = 0, 7 - 1
-          ev_y(i) = x(i) + ((t + (-ev_del)) - told) * acc(i)
         end do
         ev_y(7) = x(7) + ((t + (-ev_del)) - told) * tay(7, 1)
         call wheel_spinup_events(t + (-ev_del), ev_y, c, ev_g)
@@ -9285,32 +9267,14 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, 7 - 1
-              acc(i) = tay(i, order)
-            end do
             do q = 0, order - 1 - 1
-              do i = 0, 7 - 1
-                acc(i) = tay(i, (order - 1) - q) + (ev_tb - told) * acc(i)
-              end do
-            end do
-            do i = 0, 7 - 1
-              ev_y(i) = x(i) + (ev_tb - told) * acc(i)
             end do
             ev_y(7) = x(7) + (ev_tb - told) * tay(7, 1)
             call wheel_spinup_events(ev_tb, ev_y, c, ev_g)
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
-            do i = 0, 7 - 1
-              acc(i) = tay(i, order)
-            end do
             do q = 0, order - 1 - 1
-              do i = 0, 7 - 1
-                acc(i) = tay(i, (order - 1) - q) + ((ev_tb + (-ev_del)) - told) * acc(i)
-              end do
-            end do
-            do i = 0, 7 - 1
-              ev_y(i) = x(i) + ((ev_tb + (-ev_del)) - told) * acc(i)
             end do
             ev_y(7) = x(7) + ((ev_tb + (-ev_del)) - told) * tay(7, 1)
             call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
@@ -9375,16 +9339,7 @@ contains
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, 7 - 1
-                  acc(i) = tay(i, order)
-                end do
                 do q = 0, order - 1 - 1
-                  do i = 0, 7 - 1
-                    acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                  end do
-                end do
-                do i = 0, 7 - 1
-                  ev_y(i) = x(i) + (ev_m - told) * acc(i)
                 end do
                 ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                 call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9422,16 +9377,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, 7 - 1
-                    acc(i) = tay(i, order)
-                  end do
                   do q = 0, order - 1 - 1
-                    do i = 0, 7 - 1
-                      acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                    end do
-                  end do
-                  do i = 0, 7 - 1
-                    ev_y(i) = x(i) + (ev_m - told) * acc(i)
                   end do
                   ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                   call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9468,16 +9414,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, 7 - 1
-                      acc(i) = tay(i, order)
-                    end do
                     do q = 0, order - 1 - 1
-                      do i = 0, 7 - 1
-                        acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                      end do
-                    end do
-                    do i = 0, 7 - 1
-                      ev_y(i) = x(i) + (ev_m - told) * acc(i)
                     end do
                     ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                     call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9516,16 +9453,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, 7 - 1
-                      acc(i) = tay(i, order)
-                    end do
                     do q = 0, order - 1 - 1
-                      do i = 0, 7 - 1
-                        acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                      end do
-                    end do
-                    do i = 0, 7 - 1
-                      ev_y(i) = x(i) + (ev_m - told) * acc(i)
                     end do
                     ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                     call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9562,16 +9490,7 @@ contains
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, 7 - 1
-                        acc(i) = tay(i, order)
-                      end do
                       do q = 0, order - 1 - 1
-                        do i = 0, 7 - 1
-                          acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                        end do
-                      end do
-                      do i = 0, 7 - 1
-                        ev_y(i) = x(i) + (ev_m - told) * acc(i)
                       end do
                       ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                       call wheel_spinup_events(ev_m, ev_y, c, ev_g)
