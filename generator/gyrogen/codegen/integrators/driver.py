@@ -194,13 +194,19 @@ def lane_grid_locals(body: object) -> tuple[Decl, ...]:
     )
 
 
-def step_lanes(m: Method, body: tuple[S, ...], locals_: tuple[Decl, ...], grid: bool) -> Func:
+def step_lanes(
+    m: Method, body: tuple[S, ...], locals_: tuple[Decl, ...], grid: bool | Grid
+) -> Func:
     """m's loop turned once on every lane: m.name_step_lanes, or with a grid
-    m.name_grid_step_lanes, its locals joined by the grid's (lane_grid_locals)."""
+    m.name_grid_step_lanes (with events m.name_events_step_lanes), its
+    locals joined by the grid's (lane_grid_locals, lane_event_locals)."""
     if grid:
         locals_ += lane_grid_locals(body)
-        doc = (f"One turn of {m.name}_grid's loop on every lane.",)
-        return Func(f"{m.name}_grid_step_lanes", LANE_PARAMS, body, None, locals_, doc)
+        if isinstance(grid, Grid) and grid.events:
+            locals_ += lane_event_locals(grid, body)
+        name = f"{m.name}_{variant(grid)}"
+        doc = (f"One turn of {name}'s loop on every lane.",)
+        return Func(f"{name}_step_lanes", LANE_PARAMS, body, None, locals_, doc)
     doc = (f"One turn of {m.name}_integrate's loop on every lane.",)
     return Func(f"{m.name}_step_lanes", LANE_PARAMS, body, None, locals_, doc)
 
