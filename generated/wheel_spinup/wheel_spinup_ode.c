@@ -13408,6 +13408,9 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
     int ev_it;
     int ev_last;
     int ev_res;
+    double fend[WHEEL_SPINUP_NX];
+    static const double ks[21] = {0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0,
+            12.0, 13.0, 14.0, 15.0, 16.0, 17.0, 18.0, 19.0, 20.0};
     int ev_k;
     int i;
     int j;
@@ -13738,18 +13741,23 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
         h2 = h * h;
         for (i = 0; i < 7; ++i) {
             xnew[i] = tay[order][i];
+            fend[i] = ks[order] * tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
             for (i = 0; i < 7; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+                fend[i] = ks[order - 2 * q - 2] * tay[order - 2 * q - 2][i] + h * (ks[order - 2 *
+                        q - 1] * tay[order - 2 * q - 1][i]) + h2 * fend[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
             for (i = 0; i < 7; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
+                fend[i] = tay[1][i] + h * fend[i];
             }
         }
         xnew[7] = tay[1][7];
+        fend[7] = tay[1][7];
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
@@ -13782,9 +13790,9 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
             ev_dt = ev_cap;
             ev_del = (t - told) * 1.52587890625e-05;
             if (ev_dold[0] < 0.0) {
-                for (q = 0; q < order - 1; ++q) {
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = x[i] + ev_del * tay[1][i];
                 }
-                ev_y[7] = x[7] + (told + ev_del - told) * tay[1][7];
                 wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
@@ -13793,9 +13801,9 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                     ev_dold[ev_k] = ev_dnew[ev_k];
                 }
             }
-            for (q = 0; q < order - 1; ++q) {
+            for (i = 7; i < 8; ++i) {
+                ev_y[i] = xnew[i] + -ev_del * fend[i];
             }
-            ev_y[7] = x[7] + (t + -ev_del - told) * tay[1][7];
             wheel_spinup_events(t + -ev_del, ev_y, c, ev_g);
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_end[ev_k]) / fabs(-ev_del);

@@ -8848,6 +8848,11 @@ contains
     integer(c_int) :: ev_it
     integer(c_int) :: ev_last
     integer(c_int) :: ev_res
+    real(c_double) :: fend(0:nx - 1)
+    real(c_double), parameter :: ks(0:20) = [0.0_c_double, 1.0_c_double, 2.0_c_double, &
+        3.0_c_double, 4.0_c_double, 5.0_c_double, 6.0_c_double, 7.0_c_double, 8.0_c_double, &
+        9.0_c_double, 10.0_c_double, 11.0_c_double, 12.0_c_double, 13.0_c_double, 14.0_c_double, &
+        15.0_c_double, 16.0_c_double, 17.0_c_double, 18.0_c_double, 19.0_c_double, 20.0_c_double]
     integer(c_int) :: ev_k
     integer(c_int) :: i
     integer(c_int) :: j
@@ -9181,18 +9186,24 @@ contains
       h2 = h * h
       do i = 0, 7 - 1
         xnew(i) = tay(i, order)
+        fend(i) = ks(order) * tay(i, order)
       end do
       do q = 0, (order - 1) / 2 - 1
         do i = 0, 7 - 1
           xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
+          fend(i) = (ks((order - 2 * q) - 2) * tay(i, &
+              (order - 2 * q) - 2) + h * (ks((order - 2 * q) - 1) * tay(i, &
+              (order - 2 * q) - 1))) + h2 * fend(i)
         end do
       end do
       do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
         do i = 0, 7 - 1
           xnew(i) = tay(i, 1) + h * xnew(i)
+          fend(i) = tay(i, 1) + h * fend(i)
         end do
       end do
       xnew(7) = tay(7, 1)
+      fend(7) = tay(7, 1)
       do i = 0, nx - 1
         dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)
@@ -9226,9 +9237,9 @@ contains
         ev_dt = ev_cap
         ev_del = (t - told) * 1.52587890625e-05_c_double
         if (ev_dold(0) < 0.0_c_double) then
-          do q = 0, order - 1 - 1
+          do i = 7, 8 - 1
+            ev_y(i) = x(i) + ev_del * tay(i, 1)
           end do
-          ev_y(7) = x(7) + ((told + ev_del) - told) * tay(7, 1)
           call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
           do ev_k = 0, 1 - 1
             ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
@@ -9237,9 +9248,9 @@ contains
             ev_dold(ev_k) = ev_dnew(ev_k)
           end do
         end if
-        do q = 0, order - 1 - 1
+        do i = 7, 8 - 1
+          ev_y(i) = xnew(i) + (-ev_del) * fend(i)
         end do
-        ev_y(7) = x(7) + ((t + (-ev_del)) - told) * tay(7, 1)
         call wheel_spinup_events(t + (-ev_del), ev_y, c, ev_g)
         do ev_k = 0, 1 - 1
           ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_end(ev_k)) / abs(-ev_del)
