@@ -1,6 +1,7 @@
 """`make bench-events`: what locating events costs over the plain run, in C.
 
     python benchmarks/bench_events.py [--t1 T] [--tol TOL] [--repeats R] [--rounds K]
+        [--write DIR | --against DIR]
 
 The default scene with three non-terminal events, as a GNC engineer would
 watch it: the nutation angle, the wheel rate u4 and the angle q2 each
@@ -12,6 +13,12 @@ output, logged), the state reset before each. Each figure is the best of R
 repeats of a loop of ~20 ms, in K rounds run side by side, timed by the
 thread's CPU time; the load average is printed before and after. Also: how
 many crossings each method logged, and the steps of each call.
+
+--write DIR renders the scene's sources into DIR and stops (with the gyrogen
+on PYTHONPATH: another tree's generator renders its own); --against DIR
+builds DIR's sources by this tree's build path and times them as "old",
+in the same rounds, each method's old row under its new one, and says
+whether both logged the same times.
 """
 
 from __future__ import annotations
@@ -31,8 +38,9 @@ from gyrogen.abi import MAX_STEPS
 from gyrogen.analysis.bench.timing import best_time
 from gyrogen.analysis.simulate.engine import runtime_values
 from gyrogen.analysis.sweep.spec import threshold_events
+from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
-from gyrogen.runtime.scene_build import build_scene
+from gyrogen.runtime.scene_build import build_scene, write_scene
 from gyrogen.scene import Scene, default
 from gyrogen.scene.events import Event
 
@@ -105,34 +113,55 @@ def main() -> None:
     ap.add_argument("--tol", type=float, default=1e-10)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=3)
+    which = ap.add_mutually_exclusive_group()
+    which.add_argument("--write", metavar="DIR", type=Path)
+    which.add_argument("--against", metavar="DIR", type=Path)
     args = ap.parse_args()
     scene = watched(default(), args.t1, args.tol)
+    if args.write:
+        write_scene(scene, args.write)
+        print(f"{scene.name} with its three events: sources in {args.write}")
+        return
     with tempfile.TemporaryDirectory(prefix="gyrogen-events-") as tmp:
-        built = build_scene(scene, Path(tmp), ("c",))
-    comp = built["c"]
-    c = comp.setup(runtime_values(scene))
+        built = {"new": build_scene(scene, Path(tmp), ("c",))["c"]}
+    if args.against:
+        built["old"] = build.build(args.against, "c")
+    c = built["new"].setup(runtime_values(scene))
     x0 = np.array(scene.initial_state())
     print(f"{scene.name}, 0 to {args.t1:g} s, tol {args.tol:g}, three non-terminal events:")
     for e in scene.events:
         print(f"  {e.name}: {e.expr[:90]}{'...' if len(e.expr) > 90 else ''}")
+    if args.against:
+        print(f"old: the sources in {args.against}, built by this tree's build path")
     print(f"before: {load()}")
     print(f"\n{'method':<8} {'plain us':>10} {'events us':>10} {'events/plain':>13} "
-          f"{'crossings':>10} {'steps':>6}")  # fmt: skip
+          f"{'crossings':>10} {'steps':>6} {'rhs_calls':>10}")  # fmt: skip
     for method in methods.ADAPTIVE:
-        runs = contenders(comp, method, x0, c, args.t1, args.tol)
+        runs = {
+            (k, name): f
+            for k, comp in built.items()
+            for name, f in contenders(comp, method, x0, c, args.t1, args.tol).items()
+        }
         best = dict.fromkeys(runs, np.inf)
         for _ in range(args.rounds):
-            for name, fn in runs.items():
-                best[name] = min(
-                    best[name], best_time(fn, args.repeats, clock=time.thread_time) * 1e6
+            for key, fn in runs.items():
+                best[key] = min(
+                    best[key], best_time(fn, args.repeats, clock=time.thread_time) * 1e6
                 )
-        _, log, stats, code = comp.integrate_events(
-            method, x0, c, np.array([0.0, args.t1]), rtol=args.tol, atol=args.tol
-        )
-        assert code == 0, code
-        p, e = best["plain"], best["events"]
-        print(f"{method:<8} {p:10.1f} {e:10.1f} {e / p:13.2f} {len(log):10d} "
-              f"{stats['accepted']:6d}")  # fmt: skip
+        times = []
+        for k, comp in built.items():
+            _, log, stats, code = comp.integrate_events(
+                method, x0, c, np.array([0.0, args.t1]), rtol=args.tol, atol=args.tol
+            )
+            assert code == 0, code
+            times.append(log.times)
+            p, e = best[(k, "plain")], best[(k, "events")]
+            label = method if k == "new" else f"  {k}"
+            print(f"{label:<8} {p:10.1f} {e:10.1f} {e / p:13.2f} {len(log):10d} "
+                  f"{stats['accepted']:6d} {stats['rhs_calls']:10d}")  # fmt: skip
+        if args.against:
+            same = np.array_equal(times[0], times[1])
+            print(f"  {'the same event times' if same else 'event times differ'}")
     print(f"\nafter: {load()}")
 
 

@@ -752,16 +752,25 @@ terminal = true
 """
 
 
-@pytest.mark.parametrize("lanes", [1, 4, 8])
-def test_a_batch_over_lanes_is_its_single_calls(tmp_path: Path, lanes: int) -> None:
+@pytest.mark.parametrize(
+    "method, lanes",
+    [("dop853", 1), ("dop853", 4), ("dop853", 8), ("radau5", 4),
+     pytest.param("radau5", 1, marks=WIDE), pytest.param("radau5", 8, marks=WIDE)],
+)  # fmt: skip
+def test_a_batch_over_lanes_is_its_single_calls(tmp_path: Path, method: str, lanes: int) -> None:
     """Events on the states alone (searched at the steps' ends: a lane's
     interpolant only where it needs it) in _events_batch over lanes of
-    width 1, 4 and 8, C: each state's rows, log (times, events, states),
-    statistics and code are its _events call's bit for bit, with a
-    terminal event on some lanes only, lanes that never fire, an event
-    at t0 (q3 = 2 there: no crossing), a NaN start and logs that fill."""
-    scene = _scene("dual_spin", ON_STATES)
+    width 1, 4 and 8, C (radau5's where the scene asks for its lanes):
+    each state's rows, log (times, events, states), statistics and code
+    are its _events call's bit for bit, with a terminal event on some
+    lanes only, lanes that never fire, an event at t0 (q3 = 2 there: no
+    crossing), a NaN start and logs that fill."""
+    text = builtin_text("dual_spin")
+    if method == "radau5":
+        text = text.replace("\n[", '\nlanes = ["radau5"]\n\n[', 1)
+    scene = parse(text + ON_STATES, "dual_spin+events")
     write_sources(scene, tmp_path)
+    assert f"pair_batch({method}_events_step_lanes" in next(tmp_path.glob("*_ode.c")).read_text()
     header = next(tmp_path.glob("*_ode.h"))
     text = header.read_text()
     default = next(line for line in text.splitlines() if line.endswith("_LANES 8"))
@@ -777,11 +786,11 @@ def test_a_batch_over_lanes_is_its_single_calls(tmp_path: Path, lanes: int) -> N
     codes = set()
     for capacity in (8, 1):
         states, logs, stats, code = comp.integrate_events_batch(
-            "dop853", x0s, c, times, 1, capacity=capacity, rtol=1e-9, atol=1e-9
+            method, x0s, c, times, 1, capacity=capacity, rtol=1e-9, atol=1e-9
         )
         for i, x0 in enumerate(x0s):
             one, log, one_stats, one_code = comp.integrate_events(
-                "dop853", x0, c, times, capacity=capacity, rtol=1e-9, atol=1e-9
+                method, x0, c, times, capacity=capacity, rtol=1e-9, atol=1e-9
             )
             assert code[i] == one_code and np.array_equal(states[i], one, equal_nan=True)
             assert dict(one_stats) == {k: stats[k][i] for k in one_stats}

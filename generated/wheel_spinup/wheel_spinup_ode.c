@@ -1393,6 +1393,7 @@ struct WHEEL_SPINUP_ALIGNED lanes {
     double ev_end[1][WHEEL_SPINUP_LANES];
     double ev_rate[1][WHEEL_SPINUP_LANES];
     double ev_dold[1][WHEEL_SPINUP_LANES];
+    double ev_dend[1][WHEEL_SPINUP_LANES];
     long nlog[WHEEL_SPINUP_LANES];
     long lbase[WHEEL_SPINUP_LANES];
     int code[WHEEL_SPINUP_LANES];
@@ -2264,6 +2265,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
     double frac[WHEEL_SPINUP_LANES] = {0};
     static const int ev_dir[1] = {1};
     static const int ev_term[1] = {0};
+    int ev_need[WHEEL_SPINUP_LANES] = {0};
     double ev_new[1];
     double ev_g[1];
     double ev_t[1];
@@ -2284,6 +2286,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
     double ev_dt;
     double ev_del;
     double ev_cap;
+    double ev_nud;
     int ev_side;
     int ev_best;
     int ev_halt;
@@ -2476,6 +2479,67 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     L->ev_end[ev_k][l] = ev_g[ev_k];
                 }
+                ev_ta = told[l];
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                if (L->ev_dold[0][l] < 0.0) {
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = L->x[i][l] + ev_del * L->k[0][i][l];
+                    }
+                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                }
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = L->xnew[i][l] + -ev_del * L->k[6][i][l];
+                }
+                wheel_spinup_events(L->t[l] + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_end[ev_k][l]) / fabs(-ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_dend[ev_k][l] = ev_dnew[ev_k];
+                }
+                ev_tb = ev_ta + ev_dt;
+                ev_need[l] = (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]) || !(ev_tb >=
+                        L->t[l] || ev_tb <= ev_ta);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_new[ev_k] = L->ev_end[ev_k][l];
+                    ev_seen[ev_k] = 0.0;
+                    if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dold[ev_k][l];
+                    }
+                    if (L->ev_dend[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dend[ev_k][l];
+                    }
+                }
+                ev_res = 1;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((L->ev_old[ev_k][l] < 0.0 &&
+                            ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] <
+                            0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))
+                            || (ev_tb - ev_ta) * L->ev_rate[ev_k][l] > ((L->ev_old[ev_k][l] < 0.0
+                            && ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] <
+                            0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))) {
+                        ev_res = 0;
+                    }
+                }
+                ev_need[l] = ev_need[l] || ev_res == 0;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && L->ev_end[ev_k][l] >=
+                            0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                            L->ev_end[ev_k][l] <= 0.0) || ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX)
+                            && !(fabs(L->ev_end[ev_k][l]) <= DBL_MAX)) ||
+                            (!(fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && (fabs(L->ev_end[ev_k][l])
+                            <= DBL_MAX))) {
+                        ev_need[l] = 1;
+                    }
+                }
             }
         }
     }
@@ -2509,27 +2573,6 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                 ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_seen[ev_k] = 0.0;
-                }
-                if (L->ev_dold[0][l] < 0.0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                        ev_y[i] = L->x[i][l] + (told[l] + ev_del - told[l]) / hs[l] *
-                                (L->dense[0][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
-                                * (L->dense[1][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
-                                (L->dense[2][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
-                                * L->dense[3][i][l])));
-                    }
-                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
-                    for (ev_k = 0; ev_k < 1; ++ev_k) {
-                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
-                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                            ev_seen[ev_k] = ev_dnew[ev_k];
-                        }
-                    }
-                    for (ev_k = 0; ev_k < 1; ++ev_k) {
-                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
-                    }
-                }
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
                     if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
                         ev_seen[ev_k] = L->ev_dold[ev_k][l];
                     }
@@ -2542,7 +2585,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                         ev_last = 1;
                     }
                     if (ev_last == 0) {
-                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        for (i = 7; i < 8; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
                                     + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
                                     (ev_tb - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
@@ -2552,23 +2595,27 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = ev_g[ev_k];
                         }
+                        for (i = 7; i < 8; ++i) {
+                            ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                    (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) /
+                                    hs[l]) * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) /
+                                    hs[l] * (L->dense[2][i][l] + (1.0 - (ev_tb + -ev_del -
+                                    told[l]) / hs[l]) * L->dense[3][i][l])));
+                        }
+                        wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
+                        }
                     } else {
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = L->ev_end[ev_k][l];
-                        }
-                    }
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                        ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
-                                (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
-                                * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
-                                (L->dense[2][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
-                                * L->dense[3][i][l])));
-                    }
-                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
-                    for (ev_k = 0; ev_k < 1; ++ev_k) {
-                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
-                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                            ev_seen[ev_k] = ev_dnew[ev_k];
+                            ev_dnew[ev_k] = L->ev_dend[ev_k][l];
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
                         }
                     }
                     ev_res = 1;
@@ -2599,6 +2646,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                             ev_gb = ev_new[ev_k];
                             ev_side = 0;
                             ev_it = 0;
+                            ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                             for (;;) {
                                 if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                     break;
@@ -2606,12 +2654,16 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                 ev_it = ev_it + 1;
                                 ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                 if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                    ev_nud = 16.0 * ev_nud;
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
                                     ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                 }
                                 if (!(ev_m > ev_a && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                             (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
                                             * (L->dense[1][i][l] + (ev_m - told[l]) / hs[l] *
@@ -2654,7 +2706,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                     if (!(ev_m > ev_f && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                 (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) /
                                                 hs[l]) * (L->dense[1][i][l] + (ev_m - told[l]) /
@@ -2678,6 +2730,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                     ev_gb = ev_gf;
                                     ev_side = 0;
                                     ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                     for (;;) {
                                         if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                             break;
@@ -2685,12 +2738,16 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                         ev_it = ev_it + 1;
                                         ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                         }
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -2735,7 +2792,7 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                         if (!(ev_m > ev_a && ev_m < ev_f)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -2760,6 +2817,8 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                         ev_gb = ev_new[ev_k];
                                         ev_side = 0;
                                         ev_it = 0;
+                                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a),
+                                                fabs(ev_b));
                                         for (;;) {
                                             if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                                 break;
@@ -2767,12 +2826,16 @@ static void dopri5_events_step_lanes(struct lanes *L, const double *c, double rt
                                             ev_it = ev_it + 1;
                                             ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                             if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                                ev_nud = 16.0 * ev_nud;
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
                                                 ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                             }
                                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                                 break;
                                             }
-                                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            for (i = 7; i < 8; ++i) {
                                                 ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                         (L->dense[0][i][l] + (1.0 - (ev_m -
                                                         told[l]) / hs[l]) * (L->dense[1][i][l] +
@@ -3771,6 +3834,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
     double frac[WHEEL_SPINUP_LANES] = {0};
     static const int ev_dir[1] = {1};
     static const int ev_term[1] = {0};
+    int ev_need[WHEEL_SPINUP_LANES] = {0};
     double ev_new[1];
     double ev_g[1];
     double ev_t[1];
@@ -3791,6 +3855,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
     double ev_dt;
     double ev_del;
     double ev_cap;
+    double ev_nud;
     int ev_side;
     int ev_best;
     int ev_halt;
@@ -4113,13 +4178,74 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     L->ev_end[ev_k][l] = ev_g[ev_k];
                 }
+                ev_ta = told[l];
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                if (L->ev_dold[0][l] < 0.0) {
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = L->x[i][l] + ev_del * L->k[0][i][l];
+                    }
+                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                }
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = L->xnew[i][l] + -ev_del * L->k[12][i][l];
+                }
+                wheel_spinup_events(L->t[l] + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_end[ev_k][l]) / fabs(-ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_dend[ev_k][l] = ev_dnew[ev_k];
+                }
+                ev_tb = ev_ta + ev_dt;
+                ev_need[l] = (L->g[l] < L->ntimes && L->times[L->g[l]] < L->t[l]) || !(ev_tb >=
+                        L->t[l] || ev_tb <= ev_ta);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_new[ev_k] = L->ev_end[ev_k][l];
+                    ev_seen[ev_k] = 0.0;
+                    if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dold[ev_k][l];
+                    }
+                    if (L->ev_dend[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dend[ev_k][l];
+                    }
+                }
+                ev_res = 1;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((L->ev_old[ev_k][l] < 0.0 &&
+                            ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] <
+                            0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))
+                            || (ev_tb - ev_ta) * L->ev_rate[ev_k][l] > ((L->ev_old[ev_k][l] < 0.0
+                            && ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] <
+                            0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))) {
+                        ev_res = 0;
+                    }
+                }
+                ev_need[l] = ev_need[l] || ev_res == 0;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && L->ev_end[ev_k][l] >=
+                            0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                            L->ev_end[ev_k][l] <= 0.0) || ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX)
+                            && !(fabs(L->ev_end[ev_k][l]) <= DBL_MAX)) ||
+                            (!(fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && (fabs(L->ev_end[ev_k][l])
+                            <= DBL_MAX))) {
+                        ev_need[l] = 1;
+                    }
+                }
             }
         }
     }
     need = 0;
     WHEEL_SPINUP_SIMD
     for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-        need |= ok[l];
+        need |= ok[l] && ev_need[l];
     }
     if (need) {
 
@@ -4172,7 +4298,8 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
         rhs_lanes(L->ts, L->y, c, L->k[15]);
         WHEEL_SPINUP_SIMD
         for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
-            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 3 : L->stats_rhs_calls[l];
+            L->stats_rhs_calls[l] = ok[l] && ev_need[l] ? L->stats_rhs_calls[l] + 3 :
+                    L->stats_rhs_calls[l];
         }
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             WHEEL_SPINUP_SIMD
@@ -4227,30 +4354,6 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                 ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_seen[ev_k] = 0.0;
-                }
-                if (L->ev_dold[0][l] < 0.0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                        ev_y[i] = L->x[i][l] + (told[l] + ev_del - told[l]) / hs[l] *
-                                (L->dense[0][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
-                                * (L->dense[1][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
-                                (L->dense[2][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
-                                * (L->dense[3][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
-                                (L->dense[4][i][l] + (1.0 - (told[l] + ev_del - told[l]) / hs[l])
-                                * (L->dense[5][i][l] + (told[l] + ev_del - told[l]) / hs[l] *
-                                L->dense[6][i][l]))))));
-                    }
-                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
-                    for (ev_k = 0; ev_k < 1; ++ev_k) {
-                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
-                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                            ev_seen[ev_k] = ev_dnew[ev_k];
-                        }
-                    }
-                    for (ev_k = 0; ev_k < 1; ++ev_k) {
-                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
-                    }
-                }
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
                     if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
                         ev_seen[ev_k] = L->ev_dold[ev_k][l];
                     }
@@ -4263,7 +4366,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                         ev_last = 1;
                     }
                     if (ev_last == 0) {
-                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        for (i = 7; i < 8; ++i) {
                             ev_y[i] = L->x[i][l] + (ev_tb - told[l]) / hs[l] * (L->dense[0][i][l]
                                     + (1.0 - (ev_tb - told[l]) / hs[l]) * (L->dense[1][i][l] +
                                     (ev_tb - told[l]) / hs[l] * (L->dense[2][i][l] + (1.0 -
@@ -4276,26 +4379,30 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = ev_g[ev_k];
                         }
+                        for (i = 7; i < 8; ++i) {
+                            ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
+                                    (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) /
+                                    hs[l]) * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) /
+                                    hs[l] * (L->dense[2][i][l] + (1.0 - (ev_tb + -ev_del -
+                                    told[l]) / hs[l]) * (L->dense[3][i][l] + (ev_tb + -ev_del -
+                                    told[l]) / hs[l] * (L->dense[4][i][l] + (1.0 - (ev_tb +
+                                    -ev_del - told[l]) / hs[l]) * (L->dense[5][i][l] + (ev_tb +
+                                    -ev_del - told[l]) / hs[l] * L->dense[6][i][l]))))));
+                        }
+                        wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
+                        }
                     } else {
                         for (ev_k = 0; ev_k < 1; ++ev_k) {
                             ev_new[ev_k] = L->ev_end[ev_k][l];
-                        }
-                    }
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                        ev_y[i] = L->x[i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
-                                (L->dense[0][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
-                                * (L->dense[1][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
-                                (L->dense[2][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
-                                * (L->dense[3][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
-                                (L->dense[4][i][l] + (1.0 - (ev_tb + -ev_del - told[l]) / hs[l])
-                                * (L->dense[5][i][l] + (ev_tb + -ev_del - told[l]) / hs[l] *
-                                L->dense[6][i][l]))))));
-                    }
-                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
-                    for (ev_k = 0; ev_k < 1; ++ev_k) {
-                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
-                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                            ev_seen[ev_k] = ev_dnew[ev_k];
+                            ev_dnew[ev_k] = L->ev_dend[ev_k][l];
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
                         }
                     }
                     ev_res = 1;
@@ -4326,6 +4433,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                             ev_gb = ev_new[ev_k];
                             ev_side = 0;
                             ev_it = 0;
+                            ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                             for (;;) {
                                 if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                     break;
@@ -4333,12 +4441,16 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                 ev_it = ev_it + 1;
                                 ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                 if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                    ev_nud = 16.0 * ev_nud;
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
                                     ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                 }
                                 if (!(ev_m > ev_a && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                             (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) / hs[l])
                                             * (L->dense[1][i][l] + (ev_m - told[l]) / hs[l] *
@@ -4384,7 +4496,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                     if (!(ev_m > ev_f && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                 (L->dense[0][i][l] + (1.0 - (ev_m - told[l]) /
                                                 hs[l]) * (L->dense[1][i][l] + (ev_m - told[l]) /
@@ -4411,6 +4523,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                     ev_gb = ev_gf;
                                     ev_side = 0;
                                     ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                     for (;;) {
                                         if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                             break;
@@ -4418,12 +4531,16 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                         ev_it = ev_it + 1;
                                         ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                         }
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -4472,7 +4589,7 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                         if (!(ev_m > ev_a && ev_m < ev_f)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                     (L->dense[0][i][l] + (1.0 - (ev_m - told[l])
                                                     / hs[l]) * (L->dense[1][i][l] + (ev_m -
@@ -4501,6 +4618,8 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                         ev_gb = ev_new[ev_k];
                                         ev_side = 0;
                                         ev_it = 0;
+                                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a),
+                                                fabs(ev_b));
                                         for (;;) {
                                             if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                                 break;
@@ -4508,12 +4627,16 @@ static void dop853_events_step_lanes(struct lanes *L, const double *c, double rt
                                             ev_it = ev_it + 1;
                                             ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                             if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                                ev_nud = 16.0 * ev_nud;
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
                                                 ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                             }
                                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                                 break;
                                             }
-                                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                            for (i = 7; i < 8; ++i) {
                                                 ev_y[i] = L->x[i][l] + (ev_m - told[l]) / hs[l] *
                                                         (L->dense[0][i][l] + (1.0 - (ev_m -
                                                         told[l]) / hs[l]) * (L->dense[1][i][l] +
@@ -6986,8 +7109,10 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
     double ev_t[1];
     double ev_rate[1];
     double ev_dold[1];
+    double ev_dend[1];
     double ev_seen[1];
     double ev_dnew[1];
+    int ev_need;
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -7003,6 +7128,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
     double ev_dt;
     double ev_del;
     double ev_cap;
+    double ev_nud;
     int ev_side;
     int ev_best;
     int ev_halt;
@@ -7150,16 +7276,76 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
 
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
         if (ok) {
-            wheel_spinup_events(t, xnew, c, ev_end);
+            wheel_spinup_events(t, xnew, c, ev_end);  /* g at the step's end: no interpolant */
+            ev_ta = told;
+            ev_cap = (t - told) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = (t - told) * 1.52587890625e-05;
+            if (ev_dold[0] < 0.0) {
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = x[i] + ev_del * k[0][i];
+                }
+                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (i = 7; i < 8; ++i) {
+                ev_y[i] = xnew[i] + -ev_del * k[6][i];
+            }
+            wheel_spinup_events(t + -ev_del, ev_y, c, ev_g);
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_end[ev_k]) / fabs(-ev_del);
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dend[ev_k] = ev_dnew[ev_k];
+            }
+            ev_tb = ev_ta + ev_dt;
+            ev_need = (g < ntimes && times[g] < t) || !(ev_tb >= t || ev_tb <= ev_ta);
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_new[ev_k] = ev_end[ev_k];
+                ev_seen[ev_k] = 0.0;
+                if (ev_dold[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dold[ev_k];
+                }
+                if (ev_dend[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dend[ev_k];
+                }
+            }
+            ev_res = 1;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0)
+                        || (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                        (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k])) || (ev_tb - ev_ta) *
+                        ev_rate[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0) ||
+                        (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                        (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k]))) {
+                    ev_res = 0;
+                }
+            }
+            ev_need = ev_need || ev_res == 0;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
+                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
+                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                    ev_need = 1;
+                }
+            }
+            if (ev_need) {
 
-            /* the dense output of order 4 */
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                dense[0][i] = xnew[i] - x[i];
-                dense[1][i] = hs * k[0][i] - dense[0][i];
-                dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
-                dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 * k[2][i] -
-                        5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i] -
-                        1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
+                /* the dense output of order 4 */
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    dense[0][i] = xnew[i] - x[i];
+                    dense[1][i] = hs * k[0][i] - dense[0][i];
+                    dense[2][i] = dense[0][i] - hs * k[6][i] - dense[1][i];
+                    dense[3][i] = hs * (-1.1270175653862835 * k[0][i] + 2.675424484351598 *
+                            k[2][i] - 5.685526961588504 * k[3][i] + 3.5219323679207912 * k[4][i]
+                            - 1.7672812570757455 * k[5][i] + 2.382468931778144 * k[6][i]);
+                }
             }
             ev_stop = t;
             ev_halt = -1;
@@ -7169,25 +7355,6 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
             ev_del = (t - told) * 1.52587890625e-05;
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 ev_seen[ev_k] = 0.0;
-            }
-            if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    ev_y[i] = x[i] + (told + ev_del - told) / hs * (dense[0][i] + (1.0 - (told +
-                            ev_del - told) / hs) * (dense[1][i] + (told + ev_del - told) / hs *
-                            (dense[2][i] + (1.0 - (told + ev_del - told) / hs) * dense[3][i])));
-                }
-                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
-                    }
-                }
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dold[ev_k] = ev_dnew[ev_k];
-                }
-            }
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if (ev_dold[ev_k] > ev_seen[ev_k]) {
                     ev_seen[ev_k] = ev_dold[ev_k];
                 }
@@ -7200,7 +7367,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
                                 told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
                                 (1.0 - (ev_tb - told) / hs) * dense[3][i])));
@@ -7209,22 +7376,26 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 -
+                                (ev_tb + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del
+                                - told) / hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) /
+                                hs) * dense[3][i])));
+                    }
+                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
                 } else {
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
-                    }
-                }
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 - (ev_tb
-                            + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del - told) /
-                            hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) / hs) *
-                            dense[3][i])));
-                }
-                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
+                        ev_dnew[ev_k] = ev_dend[ev_k];
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
                     }
                 }
                 ev_res = 1;
@@ -7253,6 +7424,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                         ev_gb = ev_new[ev_k];
                         ev_side = 0;
                         ev_it = 0;
+                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                         for (;;) {
                             if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                 break;
@@ -7260,12 +7432,16 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                             ev_it = ev_it + 1;
                             ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                ev_nud = 16.0 * ev_nud;
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 ev_m = ev_a + 0.5 * (ev_b - ev_a);
                             }
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 - (ev_m
                                         - told) / hs) * (dense[1][i] + (ev_m - told) / hs *
                                         (dense[2][i] + (1.0 - (ev_m - told) / hs) * dense[3][i])));
@@ -7305,7 +7481,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 -
                                             (ev_m - told) / hs) * (dense[1][i] + (ev_m - told) /
                                             hs * (dense[2][i] + (1.0 - (ev_m - told) / hs) *
@@ -7327,6 +7503,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                 ev_gb = ev_gf;
                                 ev_side = 0;
                                 ev_it = 0;
+                                ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                 for (;;) {
                                     if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                         break;
@@ -7334,12 +7511,16 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                     ev_it = ev_it + 1;
                                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                        ev_nud = 16.0 * ev_nud;
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                     }
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -7382,7 +7563,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -7404,6 +7585,7 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                     ev_gb = ev_new[ev_k];
                                     ev_side = 0;
                                     ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                     for (;;) {
                                         if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                             break;
@@ -7411,12 +7593,16 @@ static int dopri5_events(long ntimes, const double *times, double *x, const doub
                                         ev_it = ev_it + 1;
                                         ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                         }
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] +
                                                     (1.0 - (ev_m - told) / hs) * (dense[1][i] +
                                                     (ev_m - told) / hs * (dense[2][i] + (1.0 -
@@ -8281,8 +8467,10 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
     double ev_t[1];
     double ev_rate[1];
     double ev_dold[1];
+    double ev_dend[1];
     double ev_seen[1];
     double ev_dnew[1];
+    int ev_need;
     double ev_y[WHEEL_SPINUP_NX];
     double ev_a;
     double ev_b;
@@ -8298,6 +8486,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
     double ev_dt;
     double ev_del;
     double ev_cap;
+    double ev_nud;
     int ev_side;
     int ev_best;
     int ev_halt;
@@ -8513,59 +8702,120 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
 
         /* accept: x := xnew; f(t + h, xnew) is the next step's first stage */
         if (ok) {
-            wheel_spinup_events(t, xnew, c, ev_end);
+            wheel_spinup_events(t, xnew, c, ev_end);  /* g at the step's end: no interpolant */
+            ev_ta = told;
+            ev_cap = (t - told) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = (t - told) * 1.52587890625e-05;
+            if (ev_dold[0] < 0.0) {
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = x[i] + ev_del * k[0][i];
+                }
+                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (i = 7; i < 8; ++i) {
+                ev_y[i] = xnew[i] + -ev_del * k[12][i];
+            }
+            wheel_spinup_events(t + -ev_del, ev_y, c, ev_g);
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_end[ev_k]) / fabs(-ev_del);
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dend[ev_k] = ev_dnew[ev_k];
+            }
+            ev_tb = ev_ta + ev_dt;
+            ev_need = (g < ntimes && times[g] < t) || !(ev_tb >= t || ev_tb <= ev_ta);
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_new[ev_k] = ev_end[ev_k];
+                ev_seen[ev_k] = 0.0;
+                if (ev_dold[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dold[ev_k];
+                }
+                if (ev_dend[ev_k] > ev_seen[ev_k]) {
+                    ev_seen[ev_k] = ev_dend[ev_k];
+                }
+            }
+            ev_res = 1;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0)
+                        || (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                        (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k])) || (ev_tb - ev_ta) *
+                        ev_rate[ev_k] > ((ev_old[ev_k] < 0.0 && ev_new[ev_k] > 0.0) ||
+                        (ev_old[ev_k] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                        (fabs(ev_old[ev_k]) + fabs(ev_new[ev_k]))) {
+                    ev_res = 0;
+                }
+            }
+            ev_need = ev_need || ev_res == 0;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                if ((ev_dir[ev_k] != -1 && ev_old[ev_k] < 0.0 && ev_end[ev_k] >= 0.0) ||
+                        (ev_dir[ev_k] != 1 && ev_old[ev_k] > 0.0 && ev_end[ev_k] <= 0.0) ||
+                        ((fabs(ev_old[ev_k]) <= DBL_MAX) && !(fabs(ev_end[ev_k]) <= DBL_MAX)) ||
+                        (!(fabs(ev_old[ev_k]) <= DBL_MAX) && (fabs(ev_end[ev_k]) <= DBL_MAX))) {
+                    ev_need = 1;
+                }
+            }
+            if (ev_need) {
 
-            /* the dense output of order 7 */
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
-                        k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 * k[8][i] +
-                        0.15329179827876568 * k[9][i] + 0.00820105229563469 * k[10][i] +
-                        0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
-            }
-            wheel_spinup_rhs(told + 0.1 * hs, y, c, k[13]);
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
-                        k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 * k[7][i]
-                        - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 * k[11][i] -
-                        0.00034046500868740456 * k[12][i] + 0.1413124436746325 * k[13][i]);
-            }
-            wheel_spinup_rhs(told + 0.2 * hs, y, c, k[14]);
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 * k[5][i]
-                        + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
-                        0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
-                        2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
-            }
-            wheel_spinup_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
-            stats->rhs_calls = stats->rhs_calls + 3;
-            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                dense[0][i] = xnew[i] - x[i];
-                dense[1][i] = hs * k[0][i] - dense[0][i];
-                dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
-                dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 * k[5][i] -
-                        3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
-                        2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
-                        2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
-                        0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
-                        9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
-                dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 * k[5][i] +
-                        165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i] -
-                        22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
-                        30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
-                        15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
-                        9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
-                dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 * k[5][i] -
-                        189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i] -
-                        11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
-                        1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
-                        2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
-                        84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
-                dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 * k[5][i] -
-                        231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
-                        93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
-                        104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
-                        43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
-                        39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
+                /* the dense output of order 7 */
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    y[i] = x[i] + hs * (0.056167502283047954 * k[0][i] + 0.25350021021662483 *
+                            k[6][i] - 0.2462390374708025 * k[7][i] - 0.12419142326381637 *
+                            k[8][i] + 0.15329179827876568 * k[9][i] + 0.00820105229563469 *
+                            k[10][i] + 0.007567897660545699 * k[11][i] - 0.008298 * k[12][i]);
+                }
+                wheel_spinup_rhs(told + 0.1 * hs, y, c, k[13]);
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    y[i] = x[i] + hs * (0.03183464816350214 * k[0][i] + 0.028300909672366776 *
+                            k[5][i] + 0.053541988307438566 * k[6][i] - 0.05492374857139099 *
+                            k[7][i] - 0.00010834732869724932 * k[10][i] + 0.0003825710908356584 *
+                            k[11][i] - 0.00034046500868740456 * k[12][i] + 0.1413124436746325 *
+                            k[13][i]);
+                }
+                wheel_spinup_rhs(told + 0.2 * hs, y, c, k[14]);
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    y[i] = x[i] + hs * (-0.42889630158379194 * k[0][i] - 4.697621415361164 *
+                            k[5][i] + 7.683421196062599 * k[6][i] + 4.06898981839711 * k[7][i] +
+                            0.3567271874552811 * k[8][i] - 0.0013990241651590145 * k[12][i] +
+                            2.9475147891527724 * k[13][i] - 9.15095847217987 * k[14][i]);
+                }
+                wheel_spinup_rhs(told + 0.7777777777777778 * hs, y, c, k[15]);
+                stats->rhs_calls = stats->rhs_calls + 3;
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    dense[0][i] = xnew[i] - x[i];
+                    dense[1][i] = hs * k[0][i] - dense[0][i];
+                    dense[2][i] = dense[0][i] - hs * k[12][i] - dense[1][i];
+                    dense[3][i] = hs * (-8.428938276109013 * k[0][i] + 0.5667149535193777 *
+                            k[5][i] - 3.0689499459498917 * k[6][i] + 2.38466765651207 * k[7][i] +
+                            2.117034582445028 * k[8][i] - 0.871391583777973 * k[9][i] +
+                            2.2404374302607883 * k[10][i] + 0.6315787787694688 * k[11][i] -
+                            0.08899033645133331 * k[12][i] + 18.148505520854727 * k[13][i] -
+                            9.194632392478356 * k[14][i] - 4.436036387594894 * k[15][i]);
+                    dense[4][i] = hs * (10.427508642579134 * k[0][i] + 242.28349177525817 *
+                            k[5][i] + 165.20045171727028 * k[6][i] - 374.5467547226902 * k[7][i]
+                            - 22.113666853125306 * k[8][i] + 7.733432668472264 * k[9][i] -
+                            30.674084731089398 * k[10][i] - 9.332130526430229 * k[11][i] +
+                            15.697238121770845 * k[12][i] - 31.139403219565178 * k[13][i] -
+                            9.35292435884448 * k[14][i] + 35.81684148639408 * k[15][i]);
+                    dense[5][i] = hs * (19.985053242002433 * k[0][i] - 387.0373087493518 *
+                            k[5][i] - 189.17813819516758 * k[6][i] + 527.8081592054236 * k[7][i]
+                            - 11.57390253995963 * k[8][i] + 6.8812326946963 * k[9][i] -
+                            1.0006050966910838 * k[10][i] + 0.7777137798053443 * k[11][i] -
+                            2.778205752353508 * k[12][i] - 60.19669523126412 * k[13][i] +
+                            84.32040550667716 * k[14][i] + 11.99229113618279 * k[15][i]);
+                    dense[6][i] = hs * (-25.69393346270375 * k[0][i] - 154.18974869023643 *
+                            k[5][i] - 231.5293791760455 * k[6][i] + 357.6391179106141 * k[7][i] +
+                            93.40532418362432 * k[8][i] - 37.45832313645163 * k[9][i] +
+                            104.0996495089623 * k[10][i] + 29.8402934266605 * k[11][i] -
+                            43.53345659001114 * k[12][i] + 96.32455395918828 * k[13][i] -
+                            39.17726167561544 * k[14][i] - 149.72683625798564 * k[15][i]);
+                }
             }
             ev_stop = t;
             ev_halt = -1;
@@ -8575,28 +8825,6 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
             ev_del = (t - told) * 1.52587890625e-05;
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 ev_seen[ev_k] = 0.0;
-            }
-            if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    ev_y[i] = x[i] + (told + ev_del - told) / hs * (dense[0][i] + (1.0 - (told +
-                            ev_del - told) / hs) * (dense[1][i] + (told + ev_del - told) / hs *
-                            (dense[2][i] + (1.0 - (told + ev_del - told) / hs) * (dense[3][i] +
-                            (told + ev_del - told) / hs * (dense[4][i] + (1.0 - (told + ev_del -
-                            told) / hs) * (dense[5][i] + (told + ev_del - told) / hs *
-                            dense[6][i]))))));
-                }
-                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
-                    }
-                }
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dold[ev_k] = ev_dnew[ev_k];
-                }
-            }
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if (ev_dold[ev_k] > ev_seen[ev_k]) {
                     ev_seen[ev_k] = ev_dold[ev_k];
                 }
@@ -8609,7 +8837,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] + (ev_tb - told) / hs * (dense[0][i] + (1.0 - (ev_tb -
                                 told) / hs) * (dense[1][i] + (ev_tb - told) / hs * (dense[2][i] +
                                 (1.0 - (ev_tb - told) / hs) * (dense[3][i] + (ev_tb - told) / hs
@@ -8620,24 +8848,28 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 -
+                                (ev_tb + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del
+                                - told) / hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) /
+                                hs) * (dense[3][i] + (ev_tb + -ev_del - told) / hs * (dense[4][i]
+                                + (1.0 - (ev_tb + -ev_del - told) / hs) * (dense[5][i] + (ev_tb +
+                                -ev_del - told) / hs * dense[6][i]))))));
+                    }
+                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
                 } else {
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
-                    }
-                }
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    ev_y[i] = x[i] + (ev_tb + -ev_del - told) / hs * (dense[0][i] + (1.0 - (ev_tb
-                            + -ev_del - told) / hs) * (dense[1][i] + (ev_tb + -ev_del - told) /
-                            hs * (dense[2][i] + (1.0 - (ev_tb + -ev_del - told) / hs) *
-                            (dense[3][i] + (ev_tb + -ev_del - told) / hs * (dense[4][i] + (1.0 -
-                            (ev_tb + -ev_del - told) / hs) * (dense[5][i] + (ev_tb + -ev_del -
-                            told) / hs * dense[6][i]))))));
-                }
-                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
+                        ev_dnew[ev_k] = ev_dend[ev_k];
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
                     }
                 }
                 ev_res = 1;
@@ -8666,6 +8898,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                         ev_gb = ev_new[ev_k];
                         ev_side = 0;
                         ev_it = 0;
+                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                         for (;;) {
                             if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                 break;
@@ -8673,12 +8906,16 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                             ev_it = ev_it + 1;
                             ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                ev_nud = 16.0 * ev_nud;
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 ev_m = ev_a + 0.5 * (ev_b - ev_a);
                             }
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 - (ev_m
                                         - told) / hs) * (dense[1][i] + (ev_m - told) / hs *
                                         (dense[2][i] + (1.0 - (ev_m - told) / hs) * (dense[3][i]
@@ -8721,7 +8958,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0 -
                                             (ev_m - told) / hs) * (dense[1][i] + (ev_m - told) /
                                             hs * (dense[2][i] + (1.0 - (ev_m - told) / hs) *
@@ -8745,6 +8982,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                 ev_gb = ev_gf;
                                 ev_side = 0;
                                 ev_it = 0;
+                                ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                 for (;;) {
                                     if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                         break;
@@ -8752,12 +8990,16 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                     ev_it = ev_it + 1;
                                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                        ev_nud = 16.0 * ev_nud;
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                     }
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -8803,7 +9045,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] + (1.0
                                                 - (ev_m - told) / hs) * (dense[1][i] + (ev_m -
                                                 told) / hs * (dense[2][i] + (1.0 - (ev_m - told)
@@ -8828,6 +9070,7 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                     ev_gb = ev_new[ev_k];
                                     ev_side = 0;
                                     ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                     for (;;) {
                                         if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                             break;
@@ -8835,12 +9078,16 @@ static int dop853_events(long ntimes, const double *times, double *x, const doub
                                         ev_it = ev_it + 1;
                                         ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                         }
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = x[i] + (ev_m - told) / hs * (dense[0][i] +
                                                     (1.0 - (ev_m - told) / hs) * (dense[1][i] +
                                                     (ev_m - told) / hs * (dense[2][i] + (1.0 -
@@ -9640,6 +9887,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
     double ev_t[1];
     double ev_rate[1];
     double ev_dold[1];
+    double ev_dend[1];
     double ev_seen[1];
     double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
@@ -9657,6 +9905,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
     double ev_dt;
     double ev_del;
     double ev_cap;
+    double ev_nud;
     int ev_side;
     int ev_best;
     int ev_halt;
@@ -9760,7 +10009,38 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
             }
             h_acc = h;
             err_acc = dmax(1e-2, err);
-            wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);
+            wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);  /* g at the step's end: no interpolant */
+            ev_ta = t;
+            ev_cap = ((last ? t1 : t + h) - t) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
+            if (ev_dold[0] < 0.0) {
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = x[i] * (1.0 - (t + ev_del - t) / h) + (t + ev_del - t) / h *
+                            (xnew[i] + (1.0 - (t + ev_del - t) / h) * (dense[0][i] + (t + ev_del
+                            - t) / h * dense[1][i]));
+                }
+                wheel_spinup_events(t + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (i = 7; i < 8; ++i) {
+                ev_y[i] = x[i] * (1.0 - ((last ? t1 : t + h) + -ev_del - t) / h) + ((last ? t1 :
+                        t + h) + -ev_del - t) / h * (xnew[i] + (1.0 - ((last ? t1 : t + h) +
+                        -ev_del - t) / h) * (dense[0][i] + ((last ? t1 : t + h) + -ev_del - t) /
+                        h * dense[1][i]));
+            }
+            wheel_spinup_events((last ? t1 : t + h) + -ev_del, ev_y, c, ev_g);
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_end[ev_k]) / fabs(-ev_del);
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dend[ev_k] = ev_dnew[ev_k];
+            }
             ev_stop = last ? t1 : t + h;
             ev_halt = -1;
             ev_ta = t;
@@ -9769,25 +10049,6 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
             ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 ev_seen[ev_k] = 0.0;
-            }
-            if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    ev_y[i] = x[i] * (1.0 - (t + ev_del - t) / h) + (t + ev_del - t) / h *
-                            (xnew[i] + (1.0 - (t + ev_del - t) / h) * (dense[0][i] + (t + ev_del
-                            - t) / h * dense[1][i]));
-                }
-                wheel_spinup_events(t + ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
-                    }
-                }
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dold[ev_k] = ev_dnew[ev_k];
-                }
-            }
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if (ev_dold[ev_k] > ev_seen[ev_k]) {
                     ev_seen[ev_k] = ev_dold[ev_k];
                 }
@@ -9800,7 +10061,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = x[i] * (1.0 - (ev_tb - t) / h) + (ev_tb - t) / h * (xnew[i] +
                                 (1.0 - (ev_tb - t) / h) * (dense[0][i] + (ev_tb - t) / h *
                                 dense[1][i]));
@@ -9809,21 +10070,25 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = x[i] * (1.0 - (ev_tb + -ev_del - t) / h) + (ev_tb + -ev_del -
+                                t) / h * (xnew[i] + (1.0 - (ev_tb + -ev_del - t) / h) *
+                                (dense[0][i] + (ev_tb + -ev_del - t) / h * dense[1][i]));
+                    }
+                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
                 } else {
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
-                    }
-                }
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    ev_y[i] = x[i] * (1.0 - (ev_tb + -ev_del - t) / h) + (ev_tb + -ev_del - t) /
-                            h * (xnew[i] + (1.0 - (ev_tb + -ev_del - t) / h) * (dense[0][i] +
-                            (ev_tb + -ev_del - t) / h * dense[1][i]));
-                }
-                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
+                        ev_dnew[ev_k] = ev_dend[ev_k];
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
                     }
                 }
                 ev_res = 1;
@@ -9852,6 +10117,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                         ev_gb = ev_new[ev_k];
                         ev_side = 0;
                         ev_it = 0;
+                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                         for (;;) {
                             if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                 break;
@@ -9859,12 +10125,16 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                             ev_it = ev_it + 1;
                             ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                ev_nud = 16.0 * ev_nud;
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 ev_m = ev_a + 0.5 * (ev_b - ev_a);
                             }
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h *
                                         (xnew[i] + (1.0 - (ev_m - t) / h) * (dense[0][i] + (ev_m
                                         - t) / h * dense[1][i]));
@@ -9904,7 +10174,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h *
                                             (xnew[i] + (1.0 - (ev_m - t) / h) * (dense[0][i] +
                                             (ev_m - t) / h * dense[1][i]));
@@ -9925,6 +10195,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                 ev_gb = ev_gf;
                                 ev_side = 0;
                                 ev_it = 0;
+                                ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                 for (;;) {
                                     if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                         break;
@@ -9932,12 +10203,16 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                     ev_it = ev_it + 1;
                                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                        ev_nud = 16.0 * ev_nud;
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                     }
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h
                                                 * (xnew[i] + (1.0 - (ev_m - t) / h) *
                                                 (dense[0][i] + (ev_m - t) / h * dense[1][i]));
@@ -9979,7 +10254,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t) / h
                                                 * (xnew[i] + (1.0 - (ev_m - t) / h) *
                                                 (dense[0][i] + (ev_m - t) / h * dense[1][i]));
@@ -10000,6 +10275,7 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                     ev_gb = ev_new[ev_k];
                                     ev_side = 0;
                                     ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                     for (;;) {
                                         if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                             break;
@@ -10007,12 +10283,16 @@ static int rodas4_events(long ntimes, const double *times, double *x, const doub
                                         ev_it = ev_it + 1;
                                         ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                         }
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = x[i] * (1.0 - (ev_m - t) / h) + (ev_m - t)
                                                     / h * (xnew[i] + (1.0 - (ev_m - t) / h) *
                                                     (dense[0][i] + (ev_m - t) / h * dense[1][i]));
@@ -11190,6 +11470,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
     double ev_t[1];
     double ev_rate[1];
     double ev_dold[1];
+    double ev_dend[1];
     double ev_seen[1];
     double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
@@ -11207,6 +11488,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
     double ev_dt;
     double ev_del;
     double ev_cap;
+    double ev_nud;
     int ev_side;
     int ev_best;
     int ev_halt;
@@ -11458,18 +11740,13 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                 ak2[i] = (ak1[i] - ak) / 0.8449489742783178;
                 ak3[i] = ak2[i] - (ak - z1[i] / 0.1550510257216822) / 0.6449489742783178;
             }
-            wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);
-            ev_stop = last ? t1 : t + h;
-            ev_halt = -1;
+            wheel_spinup_events(last ? t1 : t + h, xnew, c, ev_end);  /* g at the step's end: no interpolant */
             ev_ta = t;
             ev_cap = ((last ? t1 : t + h) - t) * 1.0;
             ev_dt = ev_cap;
             ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
-                ev_seen[ev_k] = 0.0;
-            }
             if (ev_dold[0] < 0.0) {
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                for (i = 7; i < 8; ++i) {
                     ev_y[i] = xnew[i] + (t + ev_del - (last ? t1 : t + h)) / h * (ak1[i] + ((t +
                             ev_del - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
                             ((t + ev_del - (last ? t1 : t + h)) / h + 0.8449489742783178) *
@@ -11478,15 +11755,32 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                 wheel_spinup_events(t + ev_del, ev_y, c, ev_g);
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
-                    }
                 }
                 for (ev_k = 0; ev_k < 1; ++ev_k) {
                     ev_dold[ev_k] = ev_dnew[ev_k];
                 }
             }
+            for (i = 7; i < 8; ++i) {
+                ev_y[i] = xnew[i] + ((last ? t1 : t + h) + -ev_del - (last ? t1 : t + h)) / h *
+                        (ak1[i] + (((last ? t1 : t + h) + -ev_del - (last ? t1 : t + h)) / h +
+                        0.35505102572168223) * (ak2[i] + (((last ? t1 : t + h) + -ev_del - (last
+                        ? t1 : t + h)) / h + 0.8449489742783178) * ak3[i]));
+            }
+            wheel_spinup_events((last ? t1 : t + h) + -ev_del, ev_y, c, ev_g);
             for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_end[ev_k]) / fabs(-ev_del);
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dend[ev_k] = ev_dnew[ev_k];
+            }
+            ev_stop = last ? t1 : t + h;
+            ev_halt = -1;
+            ev_ta = t;
+            ev_cap = ((last ? t1 : t + h) - t) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = ((last ? t1 : t + h) - t) * 1.52587890625e-05;
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_seen[ev_k] = 0.0;
                 if (ev_dold[ev_k] > ev_seen[ev_k]) {
                     ev_seen[ev_k] = ev_dold[ev_k];
                 }
@@ -11499,7 +11793,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    for (i = 7; i < 8; ++i) {
                         ev_y[i] = xnew[i] + (ev_tb - (last ? t1 : t + h)) / h * (ak1[i] + ((ev_tb
                                 - (last ? t1 : t + h)) / h + 0.35505102572168223) * (ak2[i] +
                                 ((ev_tb - (last ? t1 : t + h)) / h + 0.8449489742783178) * ak3[i]));
@@ -11508,22 +11802,26 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = xnew[i] + (ev_tb + -ev_del - (last ? t1 : t + h)) / h * (ak1[i]
+                                + ((ev_tb + -ev_del - (last ? t1 : t + h)) / h +
+                                0.35505102572168223) * (ak2[i] + ((ev_tb + -ev_del - (last ? t1 :
+                                t + h)) / h + 0.8449489742783178) * ak3[i]));
+                    }
+                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
                 } else {
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
-                    }
-                }
-                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
-                    ev_y[i] = xnew[i] + (ev_tb + -ev_del - (last ? t1 : t + h)) / h * (ak1[i] +
-                            ((ev_tb + -ev_del - (last ? t1 : t + h)) / h + 0.35505102572168223) *
-                            (ak2[i] + ((ev_tb + -ev_del - (last ? t1 : t + h)) / h +
-                            0.8449489742783178) * ak3[i]));
-                }
-                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
+                        ev_dnew[ev_k] = ev_dend[ev_k];
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
                     }
                 }
                 ev_res = 1;
@@ -11552,6 +11850,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                         ev_gb = ev_new[ev_k];
                         ev_side = 0;
                         ev_it = 0;
+                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                         for (;;) {
                             if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                 break;
@@ -11559,12 +11858,16 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                             ev_it = ev_it + 1;
                             ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                ev_nud = 16.0 * ev_nud;
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 ev_m = ev_a + 0.5 * (ev_b - ev_a);
                             }
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            for (i = 7; i < 8; ++i) {
                                 ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h * (ak1[i] +
                                         ((ev_m - (last ? t1 : t + h)) / h + 0.35505102572168223)
                                         * (ak2[i] + ((ev_m - (last ? t1 : t + h)) / h +
@@ -11605,7 +11908,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                for (i = 7; i < 8; ++i) {
                                     ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
                                             (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
                                             0.35505102572168223) * (ak2[i] + ((ev_m - (last ? t1
@@ -11627,6 +11930,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                 ev_gb = ev_gf;
                                 ev_side = 0;
                                 ev_it = 0;
+                                ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                 for (;;) {
                                     if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                         break;
@@ -11634,12 +11938,16 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                     ev_it = ev_it + 1;
                                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                        ev_nud = 16.0 * ev_nud;
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                     }
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
                                                 (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
                                                 0.35505102572168223) * (ak2[i] + ((ev_m - (last ?
@@ -11682,7 +11990,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                    for (i = 7; i < 8; ++i) {
                                         ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h *
                                                 (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h +
                                                 0.35505102572168223) * (ak2[i] + ((ev_m - (last ?
@@ -11704,6 +12012,7 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                     ev_gb = ev_new[ev_k];
                                     ev_side = 0;
                                     ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                     for (;;) {
                                         if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                             break;
@@ -11711,12 +12020,16 @@ static int radau5_events(long ntimes, const double *times, double *x, const doub
                                         ev_it = ev_it + 1;
                                         ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                         }
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                        for (i = 7; i < 8; ++i) {
                                             ev_y[i] = xnew[i] + (ev_m - (last ? t1 : t + h)) / h
                                                     * (ak1[i] + ((ev_m - (last ? t1 : t + h)) / h
                                                     + 0.35505102572168223) * (ak2[i] + ((ev_m -
@@ -13070,6 +13383,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
     double ev_t[1];
     double ev_rate[1];
     double ev_dold[1];
+    double ev_dend[1];
     double ev_seen[1];
     double ev_dnew[1];
     double ev_y[WHEEL_SPINUP_NX];
@@ -13087,12 +13401,16 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
     double ev_dt;
     double ev_del;
     double ev_cap;
+    double ev_nud;
     int ev_side;
     int ev_best;
     int ev_halt;
     int ev_it;
     int ev_last;
     int ev_res;
+    double fend[WHEEL_SPINUP_NX];
+    static const double ks[21] = {0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0,
+            12.0, 13.0, 14.0, 15.0, 16.0, 17.0, 18.0, 19.0, 20.0};
     int ev_k;
     int i;
     int j;
@@ -13423,18 +13741,23 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
         h2 = h * h;
         for (i = 0; i < 7; ++i) {
             xnew[i] = tay[order][i];
+            fend[i] = ks[order] * tay[order][i];
         }
         for (q = 0; q < (order - 1) / 2; ++q) {
             for (i = 0; i < 7; ++i) {
                 xnew[i] = tay[order - 2 * q - 2][i] + h * tay[order - 2 * q - 1][i] + h2 * xnew[i];
+                fend[i] = ks[order - 2 * q - 2] * tay[order - 2 * q - 2][i] + h * (ks[order - 2 *
+                        q - 1] * tay[order - 2 * q - 1][i]) + h2 * fend[i];
             }
         }
         for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
             for (i = 0; i < 7; ++i) {
                 xnew[i] = tay[1][i] + h * xnew[i];
+                fend[i] = tay[1][i] + h * fend[i];
             }
         }
         xnew[7] = tay[1][7];
+        fend[7] = tay[1][7];
         for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
             dx[i] = h * xnew[i] - comp[i];
             xnew[i] = x[i] + dx[i];
@@ -13461,7 +13784,33 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
         stats->rejected = stats->rejected + (retry ? 1 : 0);
         cap = ok ? DBL_MAX : retry ? h * 0.5 : cap;
         if (ok) {
-            wheel_spinup_events(t, xnew, c, ev_end);
+            wheel_spinup_events(t, xnew, c, ev_end);  /* g at the step's end: no interpolant */
+            ev_ta = told;
+            ev_cap = (t - told) * 1.0;
+            ev_dt = ev_cap;
+            ev_del = (t - told) * 1.52587890625e-05;
+            if (ev_dold[0] < 0.0) {
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = x[i] + ev_del * tay[1][i];
+                }
+                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dold[ev_k] = ev_dnew[ev_k];
+                }
+            }
+            for (i = 7; i < 8; ++i) {
+                ev_y[i] = xnew[i] + -ev_del * fend[i];
+            }
+            wheel_spinup_events(t + -ev_del, ev_y, c, ev_g);
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_end[ev_k]) / fabs(-ev_del);
+            }
+            for (ev_k = 0; ev_k < 1; ++ev_k) {
+                ev_dend[ev_k] = ev_dnew[ev_k];
+            }
             ev_stop = t;
             ev_halt = -1;
             ev_ta = told;
@@ -13470,32 +13819,6 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
             ev_del = (t - told) * 1.52587890625e-05;
             for (ev_k = 0; ev_k < 1; ++ev_k) {
                 ev_seen[ev_k] = 0.0;
-            }
-            if (ev_dold[0] < 0.0) {
-                for (i = 0; i < 7; ++i) {
-                    acc[i] = tay[order][i];
-                }
-                for (q = 0; q < order - 1; ++q) {
-                    for (i = 0; i < 7; ++i) {
-                        acc[i] = tay[order - 1 - q][i] + (told + ev_del - told) * acc[i];
-                    }
-                }
-                for (i = 0; i < 7; ++i) {
-                    ev_y[i] = x[i] + (told + ev_del - told) * acc[i];
-                }
-                ev_y[7] = x[7] + (told + ev_del - told) * tay[1][7];
-                wheel_spinup_events(told + ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_old[ev_k]) / fabs(ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
-                    }
-                }
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dold[ev_k] = ev_dnew[ev_k];
-                }
-            }
-            for (ev_k = 0; ev_k < 1; ++ev_k) {
                 if (ev_dold[ev_k] > ev_seen[ev_k]) {
                     ev_seen[ev_k] = ev_dold[ev_k];
                 }
@@ -13508,44 +13831,30 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                     ev_last = 1;
                 }
                 if (ev_last == 0) {
-                    for (i = 0; i < 7; ++i) {
-                        acc[i] = tay[order][i];
-                    }
                     for (q = 0; q < order - 1; ++q) {
-                        for (i = 0; i < 7; ++i) {
-                            acc[i] = tay[order - 1 - q][i] + (ev_tb - told) * acc[i];
-                        }
-                    }
-                    for (i = 0; i < 7; ++i) {
-                        ev_y[i] = x[i] + (ev_tb - told) * acc[i];
                     }
                     ev_y[7] = x[7] + (ev_tb - told) * tay[1][7];
                     wheel_spinup_events(ev_tb, ev_y, c, ev_g);
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_g[ev_k];
                     }
+                    for (q = 0; q < order - 1; ++q) {
+                    }
+                    ev_y[7] = x[7] + (ev_tb + -ev_del - told) * tay[1][7];
+                    wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
+                    }
                 } else {
                     for (ev_k = 0; ev_k < 1; ++ev_k) {
                         ev_new[ev_k] = ev_end[ev_k];
-                    }
-                }
-                for (i = 0; i < 7; ++i) {
-                    acc[i] = tay[order][i];
-                }
-                for (q = 0; q < order - 1; ++q) {
-                    for (i = 0; i < 7; ++i) {
-                        acc[i] = tay[order - 1 - q][i] + (ev_tb + -ev_del - told) * acc[i];
-                    }
-                }
-                for (i = 0; i < 7; ++i) {
-                    ev_y[i] = x[i] + (ev_tb + -ev_del - told) * acc[i];
-                }
-                ev_y[7] = x[7] + (ev_tb + -ev_del - told) * tay[1][7];
-                wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
-                for (ev_k = 0; ev_k < 1; ++ev_k) {
-                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
-                    if (ev_dnew[ev_k] > ev_seen[ev_k]) {
-                        ev_seen[ev_k] = ev_dnew[ev_k];
+                        ev_dnew[ev_k] = ev_dend[ev_k];
+                        if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                            ev_seen[ev_k] = ev_dnew[ev_k];
+                        }
                     }
                 }
                 ev_res = 1;
@@ -13574,6 +13883,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                         ev_gb = ev_new[ev_k];
                         ev_side = 0;
                         ev_it = 0;
+                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                         for (;;) {
                             if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                 break;
@@ -13581,21 +13891,16 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                             ev_it = ev_it + 1;
                             ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                ev_nud = 16.0 * ev_nud;
+                            }
+                            if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 ev_m = ev_a + 0.5 * (ev_b - ev_a);
                             }
                             if (!(ev_m > ev_a && ev_m < ev_b)) {
                                 break;
                             }
-                            for (i = 0; i < 7; ++i) {
-                                acc[i] = tay[order][i];
-                            }
                             for (q = 0; q < order - 1; ++q) {
-                                for (i = 0; i < 7; ++i) {
-                                    acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                }
-                            }
-                            for (i = 0; i < 7; ++i) {
-                                ev_y[i] = x[i] + (ev_m - told) * acc[i];
                             }
                             ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                             wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -13633,16 +13938,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                 if (!(ev_m > ev_f && ev_m < ev_b)) {
                                     break;
                                 }
-                                for (i = 0; i < 7; ++i) {
-                                    acc[i] = tay[order][i];
-                                }
                                 for (q = 0; q < order - 1; ++q) {
-                                    for (i = 0; i < 7; ++i) {
-                                        acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                    }
-                                }
-                                for (i = 0; i < 7; ++i) {
-                                    ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                 }
                                 ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                 wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -13661,6 +13957,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                 ev_gb = ev_gf;
                                 ev_side = 0;
                                 ev_it = 0;
+                                ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                 for (;;) {
                                     if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                         break;
@@ -13668,21 +13965,16 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                     ev_it = ev_it + 1;
                                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                        ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                        ev_nud = 16.0 * ev_nud;
+                                    }
+                                    if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                     }
                                     if (!(ev_m > ev_a && ev_m < ev_b)) {
                                         break;
                                     }
-                                    for (i = 0; i < 7; ++i) {
-                                        acc[i] = tay[order][i];
-                                    }
                                     for (q = 0; q < order - 1; ++q) {
-                                        for (i = 0; i < 7; ++i) {
-                                            acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                        }
-                                    }
-                                    for (i = 0; i < 7; ++i) {
-                                        ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                     }
                                     ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                     wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -13722,16 +14014,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                     if (!(ev_m > ev_a && ev_m < ev_f)) {
                                         break;
                                     }
-                                    for (i = 0; i < 7; ++i) {
-                                        acc[i] = tay[order][i];
-                                    }
                                     for (q = 0; q < order - 1; ++q) {
-                                        for (i = 0; i < 7; ++i) {
-                                            acc[i] = tay[order - 1 - q][i] + (ev_m - told) * acc[i];
-                                        }
-                                    }
-                                    for (i = 0; i < 7; ++i) {
-                                        ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                     }
                                     ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                     wheel_spinup_events(ev_m, ev_y, c, ev_g);
@@ -13750,6 +14033,7 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                     ev_gb = ev_new[ev_k];
                                     ev_side = 0;
                                     ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
                                     for (;;) {
                                         if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
                                             break;
@@ -13757,22 +14041,16 @@ static int taylor_events(long ntimes, const double *times, double *x, const doub
                                         ev_it = ev_it + 1;
                                         ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             ev_m = ev_a + 0.5 * (ev_b - ev_a);
                                         }
                                         if (!(ev_m > ev_a && ev_m < ev_b)) {
                                             break;
                                         }
-                                        for (i = 0; i < 7; ++i) {
-                                            acc[i] = tay[order][i];
-                                        }
                                         for (q = 0; q < order - 1; ++q) {
-                                            for (i = 0; i < 7; ++i) {
-                                                acc[i] = tay[order - 1 - q][i] + (ev_m - told) *
-                                                        acc[i];
-                                            }
-                                        }
-                                        for (i = 0; i < 7; ++i) {
-                                            ev_y[i] = x[i] + (ev_m - told) * acc[i];
                                         }
                                         ev_y[7] = x[7] + (ev_m - told) * tay[1][7];
                                         wheel_spinup_events(ev_m, ev_y, c, ev_g);

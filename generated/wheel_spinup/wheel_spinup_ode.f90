@@ -1938,8 +1938,10 @@ contains
     real(c_double) :: ev_t(0:0)
     real(c_double) :: ev_rate(0:0)
     real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_dend(0:0)
     real(c_double) :: ev_seen(0:0)
     real(c_double) :: ev_dnew(0:0)
+    logical :: ev_need
     real(c_double) :: ev_y(0:nx - 1)
     real(c_double) :: ev_a
     real(c_double) :: ev_b
@@ -1955,6 +1957,7 @@ contains
     real(c_double) :: ev_dt
     real(c_double) :: ev_del
     real(c_double) :: ev_cap
+    real(c_double) :: ev_nud
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
@@ -2111,18 +2114,81 @@ contains
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
-        call wheel_spinup_events(t, xnew, c, ev_end)
-
-        ! the dense output of order 4
-        do i = 0, nx - 1
-          dense(i, 0) = xnew(i) - x(i)
-          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
-          dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
-          dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
-              0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
-              3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
-              5)) + 2.382468931778144_c_double * k(i, 6))
+        call wheel_spinup_events(t, xnew, c, ev_end)  ! g at the step's end: no interpolant
+        ev_ta = told
+        ev_cap = (t - told) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = (t - told) * 1.52587890625e-05_c_double
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 7, 8 - 1
+            ev_y(i) = x(i) + ev_del * k(i, 0)
+          end do
+          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do i = 7, 8 - 1
+          ev_y(i) = xnew(i) + (-ev_del) * k(i, 6)
         end do
+        call wheel_spinup_events(t + (-ev_del), ev_y, c, ev_g)
+        do ev_k = 0, 1 - 1
+          ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_end(ev_k)) / abs(-ev_del)
+        end do
+        do ev_k = 0, 1 - 1
+          ev_dend(ev_k) = ev_dnew(ev_k)
+        end do
+        ev_tb = ev_ta + ev_dt
+        ev_need = (g < ntimes .and. times(g) < t) .or. .not. (ev_tb >= t .or. ev_tb <= ev_ta)
+        do ev_k = 0, 1 - 1
+          ev_new(ev_k) = ev_end(ev_k)
+          ev_seen(ev_k) = 0.0_c_double
+          if (ev_dold(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dold(ev_k)
+          end if
+          if (ev_dend(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dend(ev_k)
+          end if
+        end do
+        ev_res = 1
+        do ev_k = 0, 1 - 1
+          if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
+              (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. (ev_old(ev_k) &
+              > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * (abs(ev_old(ev_k)) + &
+              abs(ev_new(ev_k))) .or. (ev_tb - ev_ta) * ev_rate(ev_k) > (merge(2.0_c_double, &
+              1.0_c_double, &
+              (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. (ev_old(ev_k) &
+              > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * (abs(ev_old(ev_k)) + &
+              abs(ev_new(ev_k)))) then
+            ev_res = 0
+          end if
+        end do
+        ev_need = ev_need .or. ev_res == 0
+        do ev_k = 0, 1 - 1
+          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
+              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
+              ieee_is_finite(ev_end(ev_k)))) then
+            ev_need = .true.
+          end if
+        end do
+        if (ev_need) then
+
+          ! the dense output of order 4
+          do i = 0, nx - 1
+            dense(i, 0) = xnew(i) - x(i)
+            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+            dense(i, 2) = (dense(i, 0) - hs * k(i, 6)) - dense(i, 1)
+            dense(i, 3) = hs * ((((((-1.1270175653862835_c_double) * k(i, &
+                0) + 2.675424484351598_c_double * k(i, 2)) - 5.685526961588504_c_double * k(i, &
+                3)) + 3.5219323679207912_c_double * k(i, 4)) - 1.7672812570757455_c_double * k(i, &
+                5)) + 2.382468931778144_c_double * k(i, 6))
+          end do
+        end if
         ev_stop = t
         ev_halt = -1
         ev_ta = told
@@ -2131,26 +2197,6 @@ contains
         ev_del = (t - told) * 1.52587890625e-05_c_double
         do ev_k = 0, 1 - 1
           ev_seen(ev_k) = 0.0_c_double
-        end do
-        if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
-            ev_y(i) = x(i) + (((told + ev_del) - told) / hs) * (dense(i, &
-                0) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
-                1) + (((told + ev_del) - told) / hs) * (dense(i, &
-                2) + (1.0_c_double - ((told + ev_del) - told) / hs) * dense(i, 3))))
-          end do
-          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
-          do ev_k = 0, 1 - 1
-            ev_dold(ev_k) = ev_dnew(ev_k)
-          end do
-        end if
-        do ev_k = 0, 1 - 1
           if (ev_dold(ev_k) > ev_seen(ev_k)) then
             ev_seen(ev_k) = ev_dold(ev_k)
           end if
@@ -2163,7 +2209,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
                   1) + ((ev_tb - told) / hs) * (dense(i, &
@@ -2173,24 +2219,28 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
+            do i = 7, 8 - 1
+              ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  2) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * dense(i, 3))))
+            end do
+            call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
+            end do
           else
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
+              ev_dnew(ev_k) = ev_dend(ev_k)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
             end do
           end if
-          do i = 0, nx - 1
-            ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                2) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * dense(i, 3))))
-          end do
-          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
           ev_res = 1
           do ev_k = 0, 1 - 1
             if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
@@ -2220,6 +2270,7 @@ contains
               ev_gb = ev_new(ev_k)
               ev_side = 0
               ev_it = 0
+              ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
               do
                 if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                   exit
@@ -2227,12 +2278,16 @@ contains
                 ev_it = ev_it + 1
                 ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                  ev_nud = 16.0_c_double * ev_nud
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                 end if
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                       0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                       1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2273,7 +2328,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                         0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                         1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2296,6 +2351,7 @@ contains
                   ev_gb = ev_gf
                   ev_side = 0
                   ev_it = 0
+                  ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                   do
                     if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                       exit
@@ -2303,12 +2359,16 @@ contains
                     ev_it = ev_it + 1
                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                      ev_nud = 16.0_c_double * ev_nud
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                     end if
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2350,7 +2410,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -2373,6 +2433,7 @@ contains
                     ev_gb = ev_new(ev_k)
                     ev_side = 0
                     ev_it = 0
+                    ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                     do
                       if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                         exit
@@ -2380,12 +2441,16 @@ contains
                       ev_it = ev_it + 1
                       ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                        ev_nud = 16.0_c_double * ev_nud
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                       end if
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                             0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                             1) + ((ev_m - told) / hs) * (dense(i, &
@@ -3369,8 +3434,10 @@ contains
     real(c_double) :: ev_t(0:0)
     real(c_double) :: ev_rate(0:0)
     real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_dend(0:0)
     real(c_double) :: ev_seen(0:0)
     real(c_double) :: ev_dnew(0:0)
+    logical :: ev_need
     real(c_double) :: ev_y(0:nx - 1)
     real(c_double) :: ev_a
     real(c_double) :: ev_b
@@ -3386,6 +3453,7 @@ contains
     real(c_double) :: ev_dt
     real(c_double) :: ev_del
     real(c_double) :: ev_cap
+    real(c_double) :: ev_nud
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
@@ -3614,71 +3682,139 @@ contains
 
       ! accept: x := xnew; f(t + h, xnew) is the next step's first stage
       if (ok) then
-        call wheel_spinup_events(t, xnew, c, ev_end)
+        call wheel_spinup_events(t, xnew, c, ev_end)  ! g at the step's end: no interpolant
+        ev_ta = told
+        ev_cap = (t - told) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = (t - told) * 1.52587890625e-05_c_double
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 7, 8 - 1
+            ev_y(i) = x(i) + ev_del * k(i, 0)
+          end do
+          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do i = 7, 8 - 1
+          ev_y(i) = xnew(i) + (-ev_del) * k(i, 12)
+        end do
+        call wheel_spinup_events(t + (-ev_del), ev_y, c, ev_g)
+        do ev_k = 0, 1 - 1
+          ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_end(ev_k)) / abs(-ev_del)
+        end do
+        do ev_k = 0, 1 - 1
+          ev_dend(ev_k) = ev_dnew(ev_k)
+        end do
+        ev_tb = ev_ta + ev_dt
+        ev_need = (g < ntimes .and. times(g) < t) .or. .not. (ev_tb >= t .or. ev_tb <= ev_ta)
+        do ev_k = 0, 1 - 1
+          ev_new(ev_k) = ev_end(ev_k)
+          ev_seen(ev_k) = 0.0_c_double
+          if (ev_dold(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dold(ev_k)
+          end if
+          if (ev_dend(ev_k) > ev_seen(ev_k)) then
+            ev_seen(ev_k) = ev_dend(ev_k)
+          end if
+        end do
+        ev_res = 1
+        do ev_k = 0, 1 - 1
+          if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
+              (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. (ev_old(ev_k) &
+              > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * (abs(ev_old(ev_k)) + &
+              abs(ev_new(ev_k))) .or. (ev_tb - ev_ta) * ev_rate(ev_k) > (merge(2.0_c_double, &
+              1.0_c_double, &
+              (ev_old(ev_k) < 0.0_c_double .and. ev_new(ev_k) > 0.0_c_double) .or. (ev_old(ev_k) &
+              > 0.0_c_double .and. ev_new(ev_k) < 0.0_c_double))) * (abs(ev_old(ev_k)) + &
+              abs(ev_new(ev_k)))) then
+            ev_res = 0
+          end if
+        end do
+        ev_need = ev_need .or. ev_res == 0
+        do ev_k = 0, 1 - 1
+          if ((ev_dir(ev_k) /= -1 .and. ev_old(ev_k) < 0.0_c_double .and. ev_end(ev_k) >= &
+              0.0_c_double) .or. (ev_dir(ev_k) /= 1 .and. ev_old(ev_k) > 0.0_c_double .and. &
+              ev_end(ev_k) <= 0.0_c_double) .or. (ieee_is_finite(ev_old(ev_k)) .and. .not. &
+              ieee_is_finite(ev_end(ev_k))) .or. (.not. ieee_is_finite(ev_old(ev_k)) .and. &
+              ieee_is_finite(ev_end(ev_k)))) then
+            ev_need = .true.
+          end if
+        end do
+        if (ev_need) then
 
-        ! the dense output of order 7
-        do i = 0, nx - 1
-          y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
-              0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
-              7)) - 0.12419142326381637_c_double * k(i, 8)) + 0.15329179827876568_c_double * k(i, &
-              9)) + 0.00820105229563469_c_double * k(i, &
-              10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
-        end do
-        call wheel_spinup_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
-        do i = 0, nx - 1
-          y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
-              0) + 0.028300909672366776_c_double * k(i, &
-              5)) + 0.053541988307438566_c_double * k(i, &
-              6)) - 0.05492374857139099_c_double * k(i, &
-              7)) - 0.00010834732869724932_c_double * k(i, &
-              10)) + 0.0003825710908356584_c_double * k(i, &
-              11)) - 0.00034046500868740456_c_double * k(i, &
-              12)) + 0.1413124436746325_c_double * k(i, 13))
-        end do
-        call wheel_spinup_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
-        do i = 0, nx - 1
-          y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
-              0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
-              6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
-              8)) - 0.0013990241651590145_c_double * k(i, &
-              12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, 14))
-        end do
-        call wheel_spinup_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
-        stats%rhs_calls = stats%rhs_calls + 3
-        do i = 0, nx - 1
-          dense(i, 0) = xnew(i) - x(i)
-          dense(i, 1) = hs * k(i, 0) - dense(i, 0)
-          dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
-          dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
-              0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
-              6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
-              8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
-              10)) + 0.6315787787694688_c_double * k(i, &
-              11)) - 0.08899033645133331_c_double * k(i, &
-              12)) + 18.148505520854727_c_double * k(i, 13)) - 9.194632392478356_c_double * k(i, &
-              14)) - 4.436036387594894_c_double * k(i, 15))
-          dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
-              0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
-              6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
-              8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
-              10)) - 9.332130526430229_c_double * k(i, 11)) + 15.697238121770845_c_double * k(i, &
-              12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
-              14)) + 35.81684148639408_c_double * k(i, 15))
-          dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
-              0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
-              6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
-              8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
-              10)) + 0.7777137798053443_c_double * k(i, 11)) - 2.778205752353508_c_double * k(i, &
-              12)) - 60.19669523126412_c_double * k(i, 13)) + 84.32040550667716_c_double * k(i, &
-              14)) + 11.99229113618279_c_double * k(i, 15))
-          dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
-              0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
-              6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
-              8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
-              10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
-              12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
-              14)) - 149.72683625798564_c_double * k(i, 15))
-        end do
+          ! the dense output of order 7
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * (((((((0.056167502283047954_c_double * k(i, &
+                0) + 0.25350021021662483_c_double * k(i, 6)) - 0.2462390374708025_c_double * k(i, &
+                7)) - 0.12419142326381637_c_double * k(i, &
+                8)) + 0.15329179827876568_c_double * k(i, &
+                9)) + 0.00820105229563469_c_double * k(i, &
+                10)) + 0.007567897660545699_c_double * k(i, 11)) - 0.008298_c_double * k(i, 12))
+          end do
+          call wheel_spinup_rhs(told + 0.1_c_double * hs, y, c, k(:, 13))
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * (((((((0.03183464816350214_c_double * k(i, &
+                0) + 0.028300909672366776_c_double * k(i, &
+                5)) + 0.053541988307438566_c_double * k(i, &
+                6)) - 0.05492374857139099_c_double * k(i, &
+                7)) - 0.00010834732869724932_c_double * k(i, &
+                10)) + 0.0003825710908356584_c_double * k(i, &
+                11)) - 0.00034046500868740456_c_double * k(i, &
+                12)) + 0.1413124436746325_c_double * k(i, 13))
+          end do
+          call wheel_spinup_rhs(told + 0.2_c_double * hs, y, c, k(:, 14))
+          do i = 0, nx - 1
+            y(i) = x(i) + hs * ((((((((-0.42889630158379194_c_double) * k(i, &
+                0) - 4.697621415361164_c_double * k(i, 5)) + 7.683421196062599_c_double * k(i, &
+                6)) + 4.06898981839711_c_double * k(i, 7)) + 0.3567271874552811_c_double * k(i, &
+                8)) - 0.0013990241651590145_c_double * k(i, &
+                12)) + 2.9475147891527724_c_double * k(i, 13)) - 9.15095847217987_c_double * k(i, &
+                14))
+          end do
+          call wheel_spinup_rhs(told + 0.7777777777777778_c_double * hs, y, c, k(:, 15))
+          stats%rhs_calls = stats%rhs_calls + 3
+          do i = 0, nx - 1
+            dense(i, 0) = xnew(i) - x(i)
+            dense(i, 1) = hs * k(i, 0) - dense(i, 0)
+            dense(i, 2) = (dense(i, 0) - hs * k(i, 12)) - dense(i, 1)
+            dense(i, 3) = hs * ((((((((((((-8.428938276109013_c_double) * k(i, &
+                0) + 0.5667149535193777_c_double * k(i, 5)) - 3.0689499459498917_c_double * k(i, &
+                6)) + 2.38466765651207_c_double * k(i, 7)) + 2.117034582445028_c_double * k(i, &
+                8)) - 0.871391583777973_c_double * k(i, 9)) + 2.2404374302607883_c_double * k(i, &
+                10)) + 0.6315787787694688_c_double * k(i, &
+                11)) - 0.08899033645133331_c_double * k(i, &
+                12)) + 18.148505520854727_c_double * k(i, &
+                13)) - 9.194632392478356_c_double * k(i, 14)) - 4.436036387594894_c_double * k(i, &
+                15))
+            dense(i, 4) = hs * (((((((((((10.427508642579134_c_double * k(i, &
+                0) + 242.28349177525817_c_double * k(i, 5)) + 165.20045171727028_c_double * k(i, &
+                6)) - 374.5467547226902_c_double * k(i, 7)) - 22.113666853125306_c_double * k(i, &
+                8)) + 7.733432668472264_c_double * k(i, 9)) - 30.674084731089398_c_double * k(i, &
+                10)) - 9.332130526430229_c_double * k(i, &
+                11)) + 15.697238121770845_c_double * k(i, &
+                12)) - 31.139403219565178_c_double * k(i, 13)) - 9.35292435884448_c_double * k(i, &
+                14)) + 35.81684148639408_c_double * k(i, 15))
+            dense(i, 5) = hs * (((((((((((19.985053242002433_c_double * k(i, &
+                0) - 387.0373087493518_c_double * k(i, 5)) - 189.17813819516758_c_double * k(i, &
+                6)) + 527.8081592054236_c_double * k(i, 7)) - 11.57390253995963_c_double * k(i, &
+                8)) + 6.8812326946963_c_double * k(i, 9)) - 1.0006050966910838_c_double * k(i, &
+                10)) + 0.7777137798053443_c_double * k(i, &
+                11)) - 2.778205752353508_c_double * k(i, 12)) - 60.19669523126412_c_double * k(i, &
+                13)) + 84.32040550667716_c_double * k(i, 14)) + 11.99229113618279_c_double * k(i, &
+                15))
+            dense(i, 6) = hs * ((((((((((((-25.69393346270375_c_double) * k(i, &
+                0) - 154.18974869023643_c_double * k(i, 5)) - 231.5293791760455_c_double * k(i, &
+                6)) + 357.6391179106141_c_double * k(i, 7)) + 93.40532418362432_c_double * k(i, &
+                8)) - 37.45832313645163_c_double * k(i, 9)) + 104.0996495089623_c_double * k(i, &
+                10)) + 29.8402934266605_c_double * k(i, 11)) - 43.53345659001114_c_double * k(i, &
+                12)) + 96.32455395918828_c_double * k(i, 13)) - 39.17726167561544_c_double * k(i, &
+                14)) - 149.72683625798564_c_double * k(i, 15))
+          end do
+        end if
         ev_stop = t
         ev_halt = -1
         ev_ta = told
@@ -3687,29 +3823,6 @@ contains
         ev_del = (t - told) * 1.52587890625e-05_c_double
         do ev_k = 0, 1 - 1
           ev_seen(ev_k) = 0.0_c_double
-        end do
-        if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
-            ev_y(i) = x(i) + (((told + ev_del) - told) / hs) * (dense(i, &
-                0) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
-                1) + (((told + ev_del) - told) / hs) * (dense(i, &
-                2) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
-                3) + (((told + ev_del) - told) / hs) * (dense(i, &
-                4) + (1.0_c_double - ((told + ev_del) - told) / hs) * (dense(i, &
-                5) + (((told + ev_del) - told) / hs) * dense(i, 6)))))))
-          end do
-          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
-          do ev_k = 0, 1 - 1
-            ev_dold(ev_k) = ev_dnew(ev_k)
-          end do
-        end if
-        do ev_k = 0, 1 - 1
           if (ev_dold(ev_k) > ev_seen(ev_k)) then
             ev_seen(ev_k) = ev_dold(ev_k)
           end if
@@ -3722,7 +3835,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) + ((ev_tb - told) / hs) * (dense(i, &
                   0) + (1.0_c_double - (ev_tb - told) / hs) * (dense(i, &
                   1) + ((ev_tb - told) / hs) * (dense(i, &
@@ -3735,27 +3848,31 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
+            do i = 7, 8 - 1
+              ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  2) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  3) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  4) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
+                  5) + (((ev_tb + (-ev_del)) - told) / hs) * dense(i, 6)))))))
+            end do
+            call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
+            end do
           else
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
+              ev_dnew(ev_k) = ev_dend(ev_k)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
             end do
           end if
-          do i = 0, nx - 1
-            ev_y(i) = x(i) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                0) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                1) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                2) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                3) + (((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                4) + (1.0_c_double - ((ev_tb + (-ev_del)) - told) / hs) * (dense(i, &
-                5) + (((ev_tb + (-ev_del)) - told) / hs) * dense(i, 6)))))))
-          end do
-          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
           ev_res = 1
           do ev_k = 0, 1 - 1
             if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
@@ -3785,6 +3902,7 @@ contains
               ev_gb = ev_new(ev_k)
               ev_side = 0
               ev_it = 0
+              ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
               do
                 if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                   exit
@@ -3792,12 +3910,16 @@ contains
                 ev_it = ev_it + 1
                 ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                  ev_nud = 16.0_c_double * ev_nud
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                 end if
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                       0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                       1) + ((ev_m - told) / hs) * (dense(i, &
@@ -3841,7 +3963,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                         0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                         1) + ((ev_m - told) / hs) * (dense(i, &
@@ -3867,6 +3989,7 @@ contains
                   ev_gb = ev_gf
                   ev_side = 0
                   ev_it = 0
+                  ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                   do
                     if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                       exit
@@ -3874,12 +3997,16 @@ contains
                     ev_it = ev_it + 1
                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                      ev_nud = 16.0_c_double * ev_nud
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                     end if
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -3924,7 +4051,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                           0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                           1) + ((ev_m - told) / hs) * (dense(i, &
@@ -3950,6 +4077,7 @@ contains
                     ev_gb = ev_new(ev_k)
                     ev_side = 0
                     ev_it = 0
+                    ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                     do
                       if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                         exit
@@ -3957,12 +4085,16 @@ contains
                       ev_it = ev_it + 1
                       ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                        ev_nud = 16.0_c_double * ev_nud
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                       end if
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = x(i) + ((ev_m - told) / hs) * (dense(i, &
                             0) + (1.0_c_double - (ev_m - told) / hs) * (dense(i, &
                             1) + ((ev_m - told) / hs) * (dense(i, &
@@ -4890,6 +5022,7 @@ contains
     real(c_double) :: ev_t(0:0)
     real(c_double) :: ev_rate(0:0)
     real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_dend(0:0)
     real(c_double) :: ev_seen(0:0)
     real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
@@ -4907,6 +5040,7 @@ contains
     real(c_double) :: ev_dt
     real(c_double) :: ev_del
     real(c_double) :: ev_cap
+    real(c_double) :: ev_nud
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
@@ -5017,7 +5151,39 @@ contains
         end if
         h_acc = h
         err_acc = max(1e-2_c_double, err)
-        call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)
+        call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)  ! g at the step's end: no interpolant
+        ev_ta = t
+        ev_cap = ((merge(t1, t + h, last)) - t) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 7, 8 - 1
+            ev_y(i) = x(i) * (1.0_c_double - ((t + ev_del) - t) / h) + (((t + ev_del) - t) / h) * &
+                (xnew(i) + (1.0_c_double - ((t + ev_del) - t) / h) * (dense(i, &
+                0) + (((t + ev_del) - t) / h) * dense(i, 1)))
+          end do
+          call wheel_spinup_events(t + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do i = 7, 8 - 1
+          ev_y(i) = x(i) * (1.0_c_double - (((merge(t1, t + h, &
+              last)) + (-ev_del)) - t) / h) + ((((merge(t1, t + h, &
+              last)) + (-ev_del)) - t) / h) * (xnew(i) + (1.0_c_double - (((merge(t1, t + h, &
+              last)) + (-ev_del)) - t) / h) * (dense(i, 0) + ((((merge(t1, t + h, &
+              last)) + (-ev_del)) - t) / h) * dense(i, 1)))
+        end do
+        call wheel_spinup_events((merge(t1, t + h, last)) + (-ev_del), ev_y, c, ev_g)
+        do ev_k = 0, 1 - 1
+          ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_end(ev_k)) / abs(-ev_del)
+        end do
+        do ev_k = 0, 1 - 1
+          ev_dend(ev_k) = ev_dnew(ev_k)
+        end do
         ev_stop = merge(t1, t + h, last)
         ev_halt = -1
         ev_ta = t
@@ -5026,25 +5192,6 @@ contains
         ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
         do ev_k = 0, 1 - 1
           ev_seen(ev_k) = 0.0_c_double
-        end do
-        if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
-            ev_y(i) = x(i) * (1.0_c_double - ((t + ev_del) - t) / h) + (((t + ev_del) - t) / h) * &
-                (xnew(i) + (1.0_c_double - ((t + ev_del) - t) / h) * (dense(i, &
-                0) + (((t + ev_del) - t) / h) * dense(i, 1)))
-          end do
-          call wheel_spinup_events(t + ev_del, ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
-          do ev_k = 0, 1 - 1
-            ev_dold(ev_k) = ev_dnew(ev_k)
-          end do
-        end if
-        do ev_k = 0, 1 - 1
           if (ev_dold(ev_k) > ev_seen(ev_k)) then
             ev_seen(ev_k) = ev_dold(ev_k)
           end if
@@ -5057,7 +5204,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = x(i) * (1.0_c_double - (ev_tb - t) / h) + ((ev_tb - t) / h) * (xnew(i) + &
                   (1.0_c_double - (ev_tb - t) / h) * (dense(i, 0) + ((ev_tb - t) / h) * dense(i, &
                   1)))
@@ -5066,23 +5213,27 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
+            do i = 7, 8 - 1
+              ev_y(i) = x(i) * (1.0_c_double - ((ev_tb + (-ev_del)) - t) / h) + (((ev_tb + &
+                  (-ev_del)) - t) / h) * (xnew(i) + (1.0_c_double - ((ev_tb + (-ev_del)) - t) / &
+                  h) * (dense(i, 0) + (((ev_tb + (-ev_del)) - t) / h) * dense(i, 1)))
+            end do
+            call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
+            end do
           else
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
+              ev_dnew(ev_k) = ev_dend(ev_k)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
             end do
           end if
-          do i = 0, nx - 1
-            ev_y(i) = x(i) * (1.0_c_double - ((ev_tb + (-ev_del)) - t) / h) + (((ev_tb + &
-                (-ev_del)) - t) / h) * (xnew(i) + (1.0_c_double - ((ev_tb + (-ev_del)) - t) / h) &
-                * (dense(i, 0) + (((ev_tb + (-ev_del)) - t) / h) * dense(i, 1)))
-          end do
-          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
           ev_res = 1
           do ev_k = 0, 1 - 1
             if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
@@ -5113,6 +5264,7 @@ contains
               ev_gb = ev_new(ev_k)
               ev_side = 0
               ev_it = 0
+              ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
               do
                 if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                   exit
@@ -5120,12 +5272,16 @@ contains
                 ev_it = ev_it + 1
                 ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                  ev_nud = 16.0_c_double * ev_nud
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                 end if
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * (xnew(i) &
                       + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                       0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5165,7 +5321,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                         (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                         0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5187,6 +5343,7 @@ contains
                   ev_gb = ev_gf
                   ev_side = 0
                   ev_it = 0
+                  ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                   do
                     if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                       exit
@@ -5194,12 +5351,16 @@ contains
                     ev_it = ev_it + 1
                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                      ev_nud = 16.0_c_double * ev_nud
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                     end if
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                           (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                           0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5240,7 +5401,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                           (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                           0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -5262,6 +5423,7 @@ contains
                     ev_gb = ev_new(ev_k)
                     ev_side = 0
                     ev_it = 0
+                    ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                     do
                       if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                         exit
@@ -5269,12 +5431,16 @@ contains
                       ev_it = ev_it + 1
                       ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                        ev_nud = 16.0_c_double * ev_nud
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                       end if
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = x(i) * (1.0_c_double - (ev_m - t) / h) + ((ev_m - t) / h) * &
                             (xnew(i) + (1.0_c_double - (ev_m - t) / h) * (dense(i, &
                             0) + ((ev_m - t) / h) * dense(i, 1)))
@@ -6606,6 +6772,7 @@ contains
     real(c_double) :: ev_t(0:0)
     real(c_double) :: ev_rate(0:0)
     real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_dend(0:0)
     real(c_double) :: ev_seen(0:0)
     real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
@@ -6623,6 +6790,7 @@ contains
     real(c_double) :: ev_dt
     real(c_double) :: ev_del
     real(c_double) :: ev_cap
+    real(c_double) :: ev_nud
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
@@ -6887,18 +7055,13 @@ contains
           ak2(i) = (ak1(i) - ak) / 0.8449489742783178_c_double
           ak3(i) = ak2(i) - (ak - z1(i) / 0.1550510257216822_c_double) / 0.6449489742783178_c_double
         end do
-        call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)
-        ev_stop = merge(t1, t + h, last)
-        ev_halt = -1
+        call wheel_spinup_events(merge(t1, t + h, last), xnew, c, ev_end)  ! g at the step's end: no interpolant
         ev_ta = t
         ev_cap = ((merge(t1, t + h, last)) - t) * 1.0_c_double
         ev_dt = ev_cap
         ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
-        do ev_k = 0, 1 - 1
-          ev_seen(ev_k) = 0.0_c_double
-        end do
         if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, nx - 1
+          do i = 7, 8 - 1
             ev_y(i) = xnew(i) + (((t + ev_del) - (merge(t1, t + h, &
                 last))) / h) * (ak1(i) + (((t + ev_del) - (merge(t1, t + h, &
                 last))) / h + 0.35505102572168223_c_double) * (ak2(i) + (((t + ev_del) - &
@@ -6907,15 +7070,33 @@ contains
           call wheel_spinup_events(t + ev_del, ev_y, c, ev_g)
           do ev_k = 0, 1 - 1
             ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
           end do
           do ev_k = 0, 1 - 1
             ev_dold(ev_k) = ev_dnew(ev_k)
           end do
         end if
+        do i = 7, 8 - 1
+          ev_y(i) = xnew(i) + ((((merge(t1, t + h, last)) + (-ev_del)) - (merge(t1, t + h, &
+              last))) / h) * (ak1(i) + ((((merge(t1, t + h, last)) + (-ev_del)) - (merge(t1, &
+              t + h, last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((((merge(t1, t + h, &
+              last)) + (-ev_del)) - (merge(t1, t + h, &
+              last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+        end do
+        call wheel_spinup_events((merge(t1, t + h, last)) + (-ev_del), ev_y, c, ev_g)
         do ev_k = 0, 1 - 1
+          ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_end(ev_k)) / abs(-ev_del)
+        end do
+        do ev_k = 0, 1 - 1
+          ev_dend(ev_k) = ev_dnew(ev_k)
+        end do
+        ev_stop = merge(t1, t + h, last)
+        ev_halt = -1
+        ev_ta = t
+        ev_cap = ((merge(t1, t + h, last)) - t) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = ((merge(t1, t + h, last)) - t) * 1.52587890625e-05_c_double
+        do ev_k = 0, 1 - 1
+          ev_seen(ev_k) = 0.0_c_double
           if (ev_dold(ev_k) > ev_seen(ev_k)) then
             ev_seen(ev_k) = ev_dold(ev_k)
           end if
@@ -6928,7 +7109,7 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, nx - 1
+            do i = 7, 8 - 1
               ev_y(i) = xnew(i) + ((ev_tb - (merge(t1, t + h, &
                   last))) / h) * (ak1(i) + ((ev_tb - (merge(t1, t + h, &
                   last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_tb - (merge(t1, &
@@ -6938,24 +7119,28 @@ contains
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
+            do i = 7, 8 - 1
+              ev_y(i) = xnew(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
+                  last))) / h) * (ak1(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
+                  last))) / h + 0.35505102572168223_c_double) * (ak2(i) + (((ev_tb + (-ev_del)) - &
+                  (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
+            end do
+            call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
+            end do
           else
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
+              ev_dnew(ev_k) = ev_dend(ev_k)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
             end do
           end if
-          do i = 0, nx - 1
-            ev_y(i) = xnew(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
-                last))) / h) * (ak1(i) + (((ev_tb + (-ev_del)) - (merge(t1, t + h, &
-                last))) / h + 0.35505102572168223_c_double) * (ak2(i) + (((ev_tb + (-ev_del)) - &
-                (merge(t1, t + h, last))) / h + 0.8449489742783178_c_double) * ak3(i)))
-          end do
-          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
           ev_res = 1
           do ev_k = 0, 1 - 1
             if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
@@ -6986,6 +7171,7 @@ contains
               ev_gb = ev_new(ev_k)
               ev_side = 0
               ev_it = 0
+              ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
               do
                 if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                   exit
@@ -6993,12 +7179,16 @@ contains
                 ev_it = ev_it + 1
                 ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                  ev_nud = 16.0_c_double * ev_nud
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                 end if
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, nx - 1
+                do i = 7, 8 - 1
                   ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                       last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                       last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - (merge(t1, &
@@ -7039,7 +7229,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, nx - 1
+                  do i = 7, 8 - 1
                     ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                         last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                         last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -7062,6 +7252,7 @@ contains
                   ev_gb = ev_gf
                   ev_side = 0
                   ev_it = 0
+                  ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                   do
                     if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                       exit
@@ -7069,12 +7260,16 @@ contains
                     ev_it = ev_it + 1
                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                      ev_nud = 16.0_c_double * ev_nud
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                     end if
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -7116,7 +7311,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, nx - 1
+                    do i = 7, 8 - 1
                       ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                           last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -7139,6 +7334,7 @@ contains
                     ev_gb = ev_new(ev_k)
                     ev_side = 0
                     ev_it = 0
+                    ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                     do
                       if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                         exit
@@ -7146,12 +7342,16 @@ contains
                       ev_it = ev_it + 1
                       ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                        ev_nud = 16.0_c_double * ev_nud
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                       end if
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, nx - 1
+                      do i = 7, 8 - 1
                         ev_y(i) = xnew(i) + ((ev_m - (merge(t1, t + h, &
                             last))) / h) * (ak1(i) + ((ev_m - (merge(t1, t + h, &
                             last))) / h + 0.35505102572168223_c_double) * (ak2(i) + ((ev_m - &
@@ -8623,6 +8823,7 @@ contains
     real(c_double) :: ev_t(0:0)
     real(c_double) :: ev_rate(0:0)
     real(c_double) :: ev_dold(0:0)
+    real(c_double) :: ev_dend(0:0)
     real(c_double) :: ev_seen(0:0)
     real(c_double) :: ev_dnew(0:0)
     real(c_double) :: ev_y(0:nx - 1)
@@ -8640,12 +8841,18 @@ contains
     real(c_double) :: ev_dt
     real(c_double) :: ev_del
     real(c_double) :: ev_cap
+    real(c_double) :: ev_nud
     integer(c_int) :: ev_side
     integer(c_int) :: ev_best
     integer(c_int) :: ev_halt
     integer(c_int) :: ev_it
     integer(c_int) :: ev_last
     integer(c_int) :: ev_res
+    real(c_double) :: fend(0:nx - 1)
+    real(c_double), parameter :: ks(0:20) = [0.0_c_double, 1.0_c_double, 2.0_c_double, &
+        3.0_c_double, 4.0_c_double, 5.0_c_double, 6.0_c_double, 7.0_c_double, 8.0_c_double, &
+        9.0_c_double, 10.0_c_double, 11.0_c_double, 12.0_c_double, 13.0_c_double, 14.0_c_double, &
+        15.0_c_double, 16.0_c_double, 17.0_c_double, 18.0_c_double, 19.0_c_double, 20.0_c_double]
     integer(c_int) :: ev_k
     integer(c_int) :: i
     integer(c_int) :: j
@@ -8979,18 +9186,24 @@ contains
       h2 = h * h
       do i = 0, 7 - 1
         xnew(i) = tay(i, order)
+        fend(i) = ks(order) * tay(i, order)
       end do
       do q = 0, (order - 1) / 2 - 1
         do i = 0, 7 - 1
           xnew(i) = (tay(i, (order - 2 * q) - 2) + h * tay(i, (order - 2 * q) - 1)) + h2 * xnew(i)
+          fend(i) = (ks((order - 2 * q) - 2) * tay(i, &
+              (order - 2 * q) - 2) + h * (ks((order - 2 * q) - 1) * tay(i, &
+              (order - 2 * q) - 1))) + h2 * fend(i)
         end do
       end do
       do q = 0, (order - 1) - 2 * ((order - 1) / 2) - 1
         do i = 0, 7 - 1
           xnew(i) = tay(i, 1) + h * xnew(i)
+          fend(i) = tay(i, 1) + h * fend(i)
         end do
       end do
       xnew(7) = tay(7, 1)
+      fend(7) = tay(7, 1)
       do i = 0, nx - 1
         dx(i) = h * xnew(i) - comp(i)
         xnew(i) = x(i) + dx(i)
@@ -9018,7 +9231,33 @@ contains
       stats%rejected = stats%rejected + (merge(1, 0, retry))
       cap = merge(huge(1.0_c_double), merge(h * 0.5_c_double, cap, retry), ok)
       if (ok) then
-        call wheel_spinup_events(t, xnew, c, ev_end)
+        call wheel_spinup_events(t, xnew, c, ev_end)  ! g at the step's end: no interpolant
+        ev_ta = told
+        ev_cap = (t - told) * 1.0_c_double
+        ev_dt = ev_cap
+        ev_del = (t - told) * 1.52587890625e-05_c_double
+        if (ev_dold(0) < 0.0_c_double) then
+          do i = 7, 8 - 1
+            ev_y(i) = x(i) + ev_del * tay(i, 1)
+          end do
+          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
+          do ev_k = 0, 1 - 1
+            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
+          end do
+          do ev_k = 0, 1 - 1
+            ev_dold(ev_k) = ev_dnew(ev_k)
+          end do
+        end if
+        do i = 7, 8 - 1
+          ev_y(i) = xnew(i) + (-ev_del) * fend(i)
+        end do
+        call wheel_spinup_events(t + (-ev_del), ev_y, c, ev_g)
+        do ev_k = 0, 1 - 1
+          ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_end(ev_k)) / abs(-ev_del)
+        end do
+        do ev_k = 0, 1 - 1
+          ev_dend(ev_k) = ev_dnew(ev_k)
+        end do
         ev_stop = t
         ev_halt = -1
         ev_ta = told
@@ -9027,32 +9266,6 @@ contains
         ev_del = (t - told) * 1.52587890625e-05_c_double
         do ev_k = 0, 1 - 1
           ev_seen(ev_k) = 0.0_c_double
-        end do
-        if (ev_dold(0) < 0.0_c_double) then
-          do i = 0, 7 - 1
-            acc(i) = tay(i, order)
-          end do
-          do q = 0, order - 1 - 1
-            do i = 0, 7 - 1
-              acc(i) = tay(i, (order - 1) - q) + ((told + ev_del) - told) * acc(i)
-            end do
-          end do
-          do i = 0, 7 - 1
-            ev_y(i) = x(i) + ((told + ev_del) - told) * acc(i)
-          end do
-          ev_y(7) = x(7) + ((told + ev_del) - told) * tay(7, 1)
-          call wheel_spinup_events(told + ev_del, ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_old(ev_k)) / abs(ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
-          do ev_k = 0, 1 - 1
-            ev_dold(ev_k) = ev_dnew(ev_k)
-          end do
-        end if
-        do ev_k = 0, 1 - 1
           if (ev_dold(ev_k) > ev_seen(ev_k)) then
             ev_seen(ev_k) = ev_dold(ev_k)
           end if
@@ -9065,46 +9278,32 @@ contains
             ev_last = 1
           end if
           if (ev_last == 0) then
-            do i = 0, 7 - 1
-              acc(i) = tay(i, order)
-            end do
             do q = 0, order - 1 - 1
-              do i = 0, 7 - 1
-                acc(i) = tay(i, (order - 1) - q) + (ev_tb - told) * acc(i)
-              end do
-            end do
-            do i = 0, 7 - 1
-              ev_y(i) = x(i) + (ev_tb - told) * acc(i)
             end do
             ev_y(7) = x(7) + (ev_tb - told) * tay(7, 1)
             call wheel_spinup_events(ev_tb, ev_y, c, ev_g)
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_g(ev_k)
             end do
+            do q = 0, order - 1 - 1
+            end do
+            ev_y(7) = x(7) + ((ev_tb + (-ev_del)) - told) * tay(7, 1)
+            call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
+            do ev_k = 0, 1 - 1
+              ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
+            end do
           else
             do ev_k = 0, 1 - 1
               ev_new(ev_k) = ev_end(ev_k)
+              ev_dnew(ev_k) = ev_dend(ev_k)
+              if (ev_dnew(ev_k) > ev_seen(ev_k)) then
+                ev_seen(ev_k) = ev_dnew(ev_k)
+              end if
             end do
           end if
-          do i = 0, 7 - 1
-            acc(i) = tay(i, order)
-          end do
-          do q = 0, order - 1 - 1
-            do i = 0, 7 - 1
-              acc(i) = tay(i, (order - 1) - q) + ((ev_tb + (-ev_del)) - told) * acc(i)
-            end do
-          end do
-          do i = 0, 7 - 1
-            ev_y(i) = x(i) + ((ev_tb + (-ev_del)) - told) * acc(i)
-          end do
-          ev_y(7) = x(7) + ((ev_tb + (-ev_del)) - told) * tay(7, 1)
-          call wheel_spinup_events(ev_tb + (-ev_del), ev_y, c, ev_g)
-          do ev_k = 0, 1 - 1
-            ev_dnew(ev_k) = abs(ev_g(ev_k) - ev_new(ev_k)) / abs(-ev_del)
-            if (ev_dnew(ev_k) > ev_seen(ev_k)) then
-              ev_seen(ev_k) = ev_dnew(ev_k)
-            end if
-          end do
           ev_res = 1
           do ev_k = 0, 1 - 1
             if ((ev_tb - ev_ta) * ev_seen(ev_k) > (merge(2.0_c_double, 1.0_c_double, &
@@ -9134,6 +9333,7 @@ contains
               ev_gb = ev_new(ev_k)
               ev_side = 0
               ev_it = 0
+              ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
               do
                 if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                   exit
@@ -9141,21 +9341,16 @@ contains
                 ev_it = ev_it + 1
                 ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                  ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                  ev_nud = 16.0_c_double * ev_nud
+                end if
+                if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                 end if
                 if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                   exit
                 end if
-                do i = 0, 7 - 1
-                  acc(i) = tay(i, order)
-                end do
                 do q = 0, order - 1 - 1
-                  do i = 0, 7 - 1
-                    acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                  end do
-                end do
-                do i = 0, 7 - 1
-                  ev_y(i) = x(i) + (ev_m - told) * acc(i)
                 end do
                 ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                 call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9193,16 +9388,7 @@ contains
                   if (.not. (ev_m > ev_f .and. ev_m < ev_b)) then
                     exit
                   end if
-                  do i = 0, 7 - 1
-                    acc(i) = tay(i, order)
-                  end do
                   do q = 0, order - 1 - 1
-                    do i = 0, 7 - 1
-                      acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                    end do
-                  end do
-                  do i = 0, 7 - 1
-                    ev_y(i) = x(i) + (ev_m - told) * acc(i)
                   end do
                   ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                   call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9222,6 +9408,7 @@ contains
                   ev_gb = ev_gf
                   ev_side = 0
                   ev_it = 0
+                  ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                   do
                     if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                       exit
@@ -9229,21 +9416,16 @@ contains
                     ev_it = ev_it + 1
                     ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                      ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                      ev_nud = 16.0_c_double * ev_nud
+                    end if
+                    if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                     end if
                     if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                       exit
                     end if
-                    do i = 0, 7 - 1
-                      acc(i) = tay(i, order)
-                    end do
                     do q = 0, order - 1 - 1
-                      do i = 0, 7 - 1
-                        acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                      end do
-                    end do
-                    do i = 0, 7 - 1
-                      ev_y(i) = x(i) + (ev_m - told) * acc(i)
                     end do
                     ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                     call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9282,16 +9464,7 @@ contains
                     if (.not. (ev_m > ev_a .and. ev_m < ev_f)) then
                       exit
                     end if
-                    do i = 0, 7 - 1
-                      acc(i) = tay(i, order)
-                    end do
                     do q = 0, order - 1 - 1
-                      do i = 0, 7 - 1
-                        acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                      end do
-                    end do
-                    do i = 0, 7 - 1
-                      ev_y(i) = x(i) + (ev_m - told) * acc(i)
                     end do
                     ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                     call wheel_spinup_events(ev_m, ev_y, c, ev_g)
@@ -9311,6 +9484,7 @@ contains
                     ev_gb = ev_new(ev_k)
                     ev_side = 0
                     ev_it = 0
+                    ev_nud = 8.881784197001252e-16_c_double * max(abs(ev_a), abs(ev_b))
                     do
                       if (abs(ev_gb) <= 0.0_c_double .or. ev_it >= 200) then
                         exit
@@ -9318,21 +9492,16 @@ contains
                       ev_it = ev_it + 1
                       ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga))
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
+                        ev_m = merge(ev_b - ev_nud, ev_a + ev_nud, ev_m >= ev_b)
+                        ev_nud = 16.0_c_double * ev_nud
+                      end if
+                      if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         ev_m = ev_a + 0.5_c_double * (ev_b - ev_a)
                       end if
                       if (.not. (ev_m > ev_a .and. ev_m < ev_b)) then
                         exit
                       end if
-                      do i = 0, 7 - 1
-                        acc(i) = tay(i, order)
-                      end do
                       do q = 0, order - 1 - 1
-                        do i = 0, 7 - 1
-                          acc(i) = tay(i, (order - 1) - q) + (ev_m - told) * acc(i)
-                        end do
-                      end do
-                      do i = 0, 7 - 1
-                        ev_y(i) = x(i) + (ev_m - told) * acc(i)
                       end do
                       ev_y(7) = x(7) + (ev_m - told) * tay(7, 1)
                       call wheel_spinup_events(ev_m, ev_y, c, ev_g)

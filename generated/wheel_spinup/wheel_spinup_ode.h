@@ -44,7 +44,11 @@ extern "C" {
  * The _events variants are the _grid ones with the scene's events located
  * (wheel_spinup_events in wheel_spinup.h):
  * each accepted step is searched in pieces on its interpolant, from the
- * whole step (the events read the states alone),
+ * whole step (the events read the states alone), dopri5's and dop853's
+ * interpolant computed only in a step with a grid time, a sign change or
+ * a piece to halve (dop853's 3 more rhs calls counted in stats.rhs_calls
+ * there alone; g's rate at their and taylor's steps' ends on the line
+ * along x' there),
  * a piece halved until the largest rate of g seen (in the step and the
  * one before) could not carry g to 0 and back within it (down to
  * 2^-16 of the step); an event whose g changes sign in a piece as its direction asks

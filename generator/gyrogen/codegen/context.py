@@ -240,7 +240,13 @@ class SceneContext:
         timed = {TIME, *self.equations.inputs}  # the time, or a table of it
         moving = any(e.free_symbols & timed for e in self.equations.events)
         pieces = EV_SUBINTERVALS if moving else 1
-        return Grid(tuple(Event(way[e.direction], e.terminal) for e in self.scene.events), pieces)
+        read = self.optimized.events.free_symbols if self.optimized.events else set()
+        reads = tuple(i for i, s in enumerate(self.states) if s in read)
+        return Grid(
+            tuple(Event(way[e.direction], e.terminal) for e in self.scene.events),
+            pieces,
+            reads if len(reads) < len(self.states) else (),
+        )
 
     @property
     def cluster(self) -> bool:

@@ -126,6 +126,8 @@ def _product(e: sm.Mul, go: Callable[[sm.Expr], E]) -> E:
 
 
 def _power(base: sm.Expr, exp: sm.Expr, go: Callable[[sm.Expr], E]) -> E:
+    if isinstance(exp, sm.Float) and abs(float(exp)) == 0.5:  # a root a Float turned (evalf)
+        exp = sm.Rational(float(exp))
     if exp.is_Integer and 1 <= abs(int(exp)) <= 3:
         b = go(base)
         prod = _fold("*", [b] * abs(int(exp)))

@@ -89,7 +89,10 @@ def interpolant(m: Method) -> driver.Interpolant:
             acc = terms[j] + (theta if j % 2 == 0 else Num(1.0) - theta) * acc
         return acc
 
-    return driver.Interpolant(tuple(out), driver.by_state(value), scratch=("y", "dense"))
+    slopes = (lambda i: k[0, i], lambda i: k[m.fnew, i])
+    return driver.Interpolant(
+        tuple(out), driver.by_state(value), scratch=("y", "dense"), slopes=slopes
+    )
 
 
 def dense_rows(m: Method) -> int:
@@ -276,7 +279,7 @@ def lanes_step(
     locals_ = (*used_locals(step), *driver.knot_locals(knots), *driver.lane_grid_locals(step))
     variant = driver.variant(grid)
     if isinstance(grid, driver.Grid) and grid.events:
-        locals_ += driver.lane_event_locals(grid)
+        locals_ += driver.lane_event_locals(grid, step)
     doc = (f"One step of {m.name}_{variant} on every lane.",)
     name = f"{m.name}_{variant}_step_lanes"
     return Func(name, driver.LANE_PARAMS, tuple(step), None, locals_, doc)

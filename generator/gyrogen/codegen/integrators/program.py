@@ -128,6 +128,11 @@ def _radau(m: Method, g: Given) -> Parts:
         [
             radau_step.lanes_step(m, g.quaternion, g.blocks, knots=g.knots),
             radau_step.lanes_step(m, g.quaternion, g.blocks, True, g.knots),
+            *(
+                [radau_step.lanes_step(m, g.quaternion, g.blocks, g.events, g.knots)]
+                if g.events
+                else []
+            ),
         ],
         radau_step.lane_state(m),
         radau_step.lane_start(m),

@@ -331,7 +331,11 @@ def _any_nonfinite(flag: Var, values: Var, n: E) -> list[S]:
 
 
 def lanes_step(
-    m: Method, quaternion: bool, blocks: Blocks, grid: bool = False, knots: driver.Knots = ()
+    m: Method,
+    quaternion: bool,
+    blocks: Blocks,
+    grid: bool | driver.Grid = False,
+    knots: driver.Knots = (),
 ) -> Func:
     """m.name_step_lanes: one turn of m.name_integrate's loop on every lane,
     each branch a selection (a lane that stopped, whose E1 or E2 is singular
@@ -340,7 +344,10 @@ def lanes_step(
     or failed keeps its values); E1 and E2 factored on every lane when any
     lane needs them (each lane's own kept factors restored by selection),
     solved by linear's functions over lanes. With grid,
-    m.name_grid_step_lanes (driver.passed, driver.reached)."""
+    m.name_grid_step_lanes (driver.passed, driver.reached); with events,
+    m.name_events_step_lanes: the step counted, then driver.lane_events
+    (which stops a lane at a terminal event or a full log), then x := xnew
+    on the lanes still taken."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Radau) and isinstance(ctl, RadauControl)
     v, w = V, L
@@ -619,9 +626,7 @@ def lanes_step(
         *control.predictive_selected(ok, quot, err),
         assign(h_new, h / quot),
         If(ok, tuple(interpolant)),
-        *(driver.passed(ok, collocation(R), sel(last, t1, t + h), t, h, row) if grid else []),
-        If(ok, tuple(accepted(quaternion))),
-        *driver.counted(ok, rej, last),
+        *(_accepted(R, quaternion, grid, ok, rej, last, cd, row)),
         *(driver.reached(row, ok) if grid else []),
         assign(cd, driver.ended(and_(take, lock), ok, last, cd)),
         Comment("after an accepted step that is not the last: the next h, J and factors"),
@@ -667,6 +672,25 @@ def lanes_step(
         Decl("stored", "int", (len(stored),), values=stored),
     )
     return driver.step_lanes(m, body, locals_, grid)
+
+
+def _accepted(R: Radau, quaternion: bool, grid: bool | driver.Grid, ok: Var, rej: Var,
+              last: Var, cd: Var, row: E) -> list[S]:  # fmt: skip
+    """A turn's acceptance over lanes: the grid times the step passes, x :=
+    xnew and the step counted; with events, the step counted first (its
+    start and size kept, driver.grid_step), then its events (a stop clears
+    ok), then x := xnew."""
+    t1 = Var("t1")
+    if isinstance(grid, driver.Grid) and grid.events:
+        told, hs = Var("told"), Var("hs")
+        return [
+            *driver.grid_step(t, h),
+            *driver.counted(ok, rej, last),
+            *driver.lane_events(grid, collocation(R), ok, cd, t, told, hs, row),
+            If(ok, tuple(accepted(quaternion))),
+        ]
+    passed = driver.passed(ok, collocation(R), sel(last, t1, t + h), t, h, row) if grid else []
+    return [*passed, If(ok, tuple(accepted(quaternion))), *driver.counted(ok, rej, last)]
 
 
 def lane_state(m: Method) -> list[Decl]:

@@ -14,6 +14,7 @@ h halved.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 from gyrogen import methods as registry
 from gyrogen.abi_groups import StateKind, state_group, state_kind
@@ -144,15 +145,16 @@ def series_output(jet: Jet, exact: list[int]) -> driver.Interpolant:
     never computed)."""
     deg = jet.degrees()
 
-    def points(tau: E, at: Callable[[E], At]) -> list[S]:
+    def points(tau: E, at: Callable[[E], At], only: tuple[int, ...] = ()) -> list[S]:
         acc, q = Var("acc"), Var("q")
+        skip = sorted(set(exact) | (set(range(jet.nx)) - set(only) if only else set()))
         out: list[S] = [
-            *_over(jet.nx, exact, assign(acc[i], T[order, i])),
-            For("q", order - 1, tuple(_over(jet.nx, exact, assign(
+            *_over(jet.nx, skip, assign(acc[i], T[order, i])),
+            For("q", order - 1, tuple(_over(jet.nx, skip, assign(
                 acc[i], T[order - Int(1) - q, i] + tau * acc[i])))),
-            *_over(jet.nx, exact, assign(at(i), x[i] + tau * acc[i])),
+            *_over(jet.nx, skip, assign(at(i), x[i] + tau * acc[i])),
         ]  # fmt: skip
-        for n in exact:
+        for n in (n for n in exact if not only or n in only):
             low = T[Int(1), Int(n)] + tau * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
             out.append(assign(at(Int(n)), x[Int(n)] + tau * low))
         return out
@@ -185,6 +187,20 @@ def step(
     def one(i: Var) -> E:
         return T[Int(1), i] + h * xnew[i]
 
+    events = isinstance(grid, driver.Grid) and bool(grid.events)
+    ks, fend = Var("ks"), Var("fend")
+
+    def slope_two(i: Var) -> E:
+        """two's for x'(t + h): each order k's coefficient times k, onto fend[i]."""
+        lo, hi = order - Int(2) * q - Int(2), order - Int(2) * q - Int(1)
+        return (ks[lo] * T[lo, i] + h * (ks[hi] * T[hi, i])) + h2 * fend[i]
+
+    def slope(n: int) -> E:
+        """x'(t + h) of a state of degree <= min_order."""
+        return (
+            T[Int(1), Int(n)] + (2.0 * h) * T[Int(2), Int(n)] if deg[n] == 2 else T[Int(1), Int(n)]
+        )
+
     series = m.tableau
     assert isinstance(series, Series)
     deg = jet.degrees()
@@ -215,10 +231,31 @@ def step(
         assign(run, cmp(cd, "<", 0)),
         Comment("x(t + h) by Horner's scheme two orders a turn, less what the last add lost"),
         assign(h2, h * h),
-        *series_states(assign(xnew[i], T[order, i])),
-        For("q", pairs, tuple(series_states(assign(xnew[i], two(i))))),
-        For("q", order - 1 - Int(2) * pairs, tuple(series_states(assign(xnew[i], one(i))))),
+        *series_states(
+            assign(xnew[i], T[order, i]),
+            *([assign(fend[i], ks[order] * T[order, i])] if events else []),
+        ),
+        For(
+            "q",
+            pairs,
+            tuple(
+                series_states(
+                    assign(xnew[i], two(i)), *([assign(fend[i], slope_two(i))] if events else [])
+                )
+            ),
+        ),
+        For(
+            "q",
+            order - 1 - Int(2) * pairs,
+            tuple(
+                series_states(
+                    assign(xnew[i], one(i)),
+                    *([assign(fend[i], T[Int(1), i] + h * fend[i])] if events else []),
+                )
+            ),
+        ),
         *(assign(xnew[Int(n)], polynomial(n)) for n in exact),
+        *(assign(fend[Int(n)], slope(n)) for n in (exact if events else [])),
         For("i", NX, (assign(dx[i], h * xnew[i] - comp[i]), assign(xnew[i], x[i] + dx[i]))),
         assign(nonfinite, Bool(False)),
         For("i", NX, (assign(nonfinite, or_(nonfinite, not_(fn("finite", xnew[i])))),)),
@@ -237,7 +274,8 @@ def step(
         return [*body, If(ok, tuple(accepted(quaternion, known=True)))]
     taken = tuple(accepted(quaternion, known=True))
     dense, told, hs = series_output(jet, exact), Var("told"), Var("hs")
-    if isinstance(grid, driver.Grid) and grid.events:
+    if isinstance(grid, driver.Grid) and grid.events:  # g's rates at the ends from x' there
+        dense = replace(dense, slopes=(lambda i: T[Int(1), i], lambda i: fend[i]))
         inside = driver.inside(dense, t, told, hs, grid, counted=True)
         return [*body, If(ok, (*inside, *taken, *driver.reached()))]
     row = driver.BASE + driver.G if lanes else driver.G
@@ -304,13 +342,7 @@ def _over(n: int, left_out: list[int], *body: S) -> list[S]:
 
 def _runs(n: int, left_out: list[int]) -> list[tuple[int, int]]:
     """The runs [a, b) of 0 .. n-1 without left_out."""
-    out: list[tuple[int, int]] = []
-    for k in (k for k in range(n) if k not in left_out):
-        if out and out[-1][1] == k:
-            out[-1] = (out[-1][0], k + 1)
-        else:
-            out.append((k, k + 1))
-    return out
+    return driver.spans([k for k in range(n) if k not in left_out])
 
 
 def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False) -> Func:
@@ -342,6 +374,9 @@ def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = 
     if grid:  # the jet's code in place: taylor_jet keeps one caller, which gcc inlines
         locals_ += (*jet_function(series, jet).locals, arr("acc", "inout"),
                     *driver.grid_locals(body, grid))  # fmt: skip
+        if isinstance(grid, driver.Grid) and grid.events:  # x' at the step's end, k's as doubles
+            ks = tuple(float(k) for k in range(series.order + 1))
+            locals_ += (arr("fend", "inout"), Decl("ks", "double", (len(ks),), values=ks))
         doc = (*m.notes, *driver.GRID_DOC)
         name, params = f"taylor_{driver.variant(grid)}", driver.grid_params(grid)
         return Func(name, params, tuple(body), "int", locals_, doc)
