@@ -64,8 +64,13 @@ def blocks(page: Path) -> list[Block]:
 
 
 def env() -> dict[str, str]:
-    """This checkout's gyrogen first: its sources, then the venv's scripts."""
+    """This checkout's gyrogen first: its sources, then the venv's scripts.
+    A CMake build the page does not give a type (the README's package) is
+    a Debug one (CMAKE_BUILD_TYPE, read by CMake 3.22 and later), as the
+    suite's own builds are at GYROGEN_OPT_LEVEL: what is checked is that the
+    commands run; test_cmake_package builds the package as Release."""
     e = dict(os.environ)
+    e.setdefault("CMAKE_BUILD_TYPE", "Debug")
     e["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{e.get('PATH', '')}"
     e["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT / "generator"), e.get("PYTHONPATH")]))
     e["NO_MKDOCS_2_WARNING"] = "1"
