@@ -457,6 +457,20 @@ def test_verify_small(tmp_path: Path, cli) -> None:
     assert "setup refusals:" in out
 
 
+def test_run_lists_the_files_it_wrote(tmp_path: Path, cli) -> None:
+    """Into a directory that holds an older version: the listing names the
+    files written, not the old versions its transaction keeps aside until
+    the command ends."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "gyrostat.c").write_text("/* an older version */\n")
+    code, text, err = cli(["run", "--out", str(out), "--states", "20", "--params", "1"])
+    assert code == 0, err
+    listed = next(line for line in text.splitlines() if line.startswith("generated "))
+    names = sorted(p.name for p in out.iterdir())
+    assert listed == f"generated {out}/ ({', '.join(names)})", listed
+
+
 @pytest.mark.slow  # a child interpreter derives the default scene (test_compile: fast)
 def test_missing_compiler_from_the_command_line(tmp_path: Path) -> None:
     """A PATH without gcc: one line naming the package, exit 1."""

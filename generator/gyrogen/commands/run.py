@@ -24,8 +24,10 @@ def run(out: Path | None, states: int, params: int, seed: int) -> None:
     scene = default()
     where = out or default_out(scene)
 
-    def listing() -> None:
-        click.echo(f"generated {where}/ ({', '.join(sorted(p.name for p in where.iterdir()))})")
+    def listing(names: list[str]) -> None:
+        # the names written: the directory also holds, until the command ends,
+        # the old versions its transaction keeps aside (gyrogen.files)
+        click.echo(f"generated {where}/ ({', '.join(names)})")
 
     built, ok = verify_scene(scene, where, (states, params, seed), listing)
     click.echo("op counts of the full model (sympy.count_ops, temporaries included):")

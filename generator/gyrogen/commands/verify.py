@@ -21,9 +21,10 @@ def verify_scene(
     scene: Scene,
     directory: Path,
     counts: tuple[int, int, int],
-    written: Callable[[], None] = lambda: None,
+    written: Callable[[list[str]], None] = lambda names: None,
 ) -> tuple[str, bool]:
-    """Write the scene's sources into directory (written is told), build
+    """Write the scene's sources into directory (written is told their
+    names), build
     every target, compare with the reference at counts (states, parameter
     sets, seed) and print the table: the build id, and whether everything
     passed. The sources are the ones scene_sources renders, or keeps from
@@ -35,7 +36,7 @@ def verify_scene(
     claim(directory, scene.name)
     sources = scene_sources(scene)
     write_atomic(directory, sources.files)
-    written()
+    written(sorted(sources.files))
     click.echo(f"building {', '.join(scene.targets)} through cffi ...")
     backends = build_dir(directory, scene.targets)
     return sources.build_id, _compare(scene, list(backends.values()), *counts)
