@@ -56,7 +56,7 @@ test: setup lint
 ## generated, compiled as C and Fortran and checked against the reference); its build cache is kept
 ## in .cache/test-fast (entries named by the hash of what built them), so a run compiles only what
 ## changed, at -O3: built once, the faster code pays off in every run (the whole suite, whose cache
-## is new each run, builds at -O1)
+## is new each run, builds at -O0; test-wide at -O2)
 test-fast: setup lint
 	GYROGEN_OPT_LEVEL=$${GYROGEN_OPT_LEVEL:-3} GYROGEN_TEST_CACHE=$(CURDIR)/.cache/test-fast \
 	  $(BIN)/python -m pytest -m "not slow"
@@ -174,7 +174,8 @@ verify-axes: setup
 ## on paths the suite's cases take, the drawn-scene shards, the sanitizers, the examples' builds, the
 ## sensitivities' costly checks and the sweeps at scale
 test-wide: setup
-	GYROGEN_WIDE=1 $(BIN)/python -m pytest -q -p no:cacheprovider -m wide
+	GYROGEN_WIDE=1 GYROGEN_OPT_LEVEL=$${GYROGEN_OPT_LEVEL:-2} \
+	  $(BIN)/python -m pytest -q -p no:cacheprovider -m wide
 
 ## fuzz: FUZZ_EVENTS draws of twelve events located by every adaptive method against scipy's on the reference,
 ## FUZZ_GIMBAL drawn (start, step) pairs against gimbal lock and FUZZ_SWEEPS drawn sweep files (and misalignments),
