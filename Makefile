@@ -86,7 +86,7 @@ check-generated: setup
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
 	half() { $(BIN)/python -c "from gyrogen.scene import builtin_names as b; n = b(); \
 	  print(*(n[:len(n) // 2], n[len(n) // 2:])[$$1])"; } && \
-	{ $(BIN)/gyrogen generate $$(half 0) --lib --no-check --out "$$tmp" >/dev/null 2>&1 & } && \
+	{ $(BIN)/gyrogen generate $$(half 0) --lib --no-check --out "$$tmp" </dev/null >/dev/null 2>&1 & } && \
 	$(BIN)/gyrogen generate $$(half 1) --lib --no-check --out "$$tmp" >/dev/null 2>&1 && wait $$! && \
 	$(RENDERED_BY) > "$$tmp/RENDERED_BY" && \
 	diff -r "$$tmp" generated && echo "generated/ is up to date"
