@@ -187,9 +187,9 @@ size_t stiff_wheel_rodas4_grid_batch(size_t n, long ntimes, const double *times,
         double *out, stiff_wheel_stats *stats, int *codes);
 
 /* Radau IIA of order 5 (three implicit stages, analytic Jacobian), adaptive.
- * Each component's error is scaled by atol' + rtol' |x_i| with Hairer's
- * rtol' = 0.1 rtol^(2/3), atol' = rtol' atol/rtol (the global error
- * then comes out near rtol); a step is accepted when their RMS is < 1.
+ * Each component's error is scaled by atol + rtol |x_i| (Hairer's radau5.f
+ * loosens rtol to 0.1 rtol^(2/3) first; this code does not); a step is
+ * accepted when their RMS is < 1.
  * h0 <= 0 picks the first step (Hairer's HINIT), a finite h0 > 0 is tried
  * first (NaN or Inf: code 5); at most max_steps steps (accepted + rejected).
  * A step whose Newton iterations meet a NaN or Inf is retried with h
