@@ -1319,7 +1319,9 @@ class Compiled:
         fixed = methods.get(method).fixed_step
         if (steps is None) == fixed:
             raise ValueError(
-                f"{method}: steps= goes with the fixed-step methods, and only with them"
+                f"{method} is a fixed-step method: give it steps= (the number of equal steps)"
+                if fixed
+                else f"{method} is adaptive: steps= goes with the fixed-step methods only"
             )
         return fixed
 
