@@ -148,8 +148,9 @@ def _taylor(m: Method, g: Given) -> Parts:
             taylor_jet.jet_lanes(m, g.jet),
             taylor.lanes_step(m, g.jet, g.quaternion),
             taylor.lanes_step(m, g.jet, g.quaternion, grid=True),
+            *([taylor.lanes_step(m, g.jet, g.quaternion, g.events)] if g.events else []),
         ],
-        taylor.lane_state(m, g.jet),
+        taylor.lane_state(m, g.jet, g.events is not None),
         [s for s in taylor.start_state() if s not in common_start],
     )
 
