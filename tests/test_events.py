@@ -754,15 +754,16 @@ terminal = true
 
 @pytest.mark.parametrize(
     "method, lanes",
-    [("dop853", 1), ("dop853", 4), ("dop853", 8), ("radau5", 4), ("taylor", 4),
+    [("dop853", 1), ("dop853", 4), ("dop853", 8), ("radau5", 4), ("taylor", 4), ("rodas4", 4),
      pytest.param("radau5", 1, marks=WIDE), pytest.param("radau5", 8, marks=WIDE),
-     pytest.param("taylor", 1, marks=WIDE), pytest.param("taylor", 8, marks=WIDE)],
+     pytest.param("taylor", 1, marks=WIDE), pytest.param("taylor", 8, marks=WIDE),
+     pytest.param("rodas4", 1, marks=WIDE), pytest.param("rodas4", 8, marks=WIDE)],
 )  # fmt: skip
 def test_a_batch_over_lanes_is_its_single_calls(tmp_path: Path, method: str, lanes: int) -> None:
     """Events on the states alone (searched at the steps' ends: a lane's
     interpolant only where it needs it) in _events_batch over lanes of
-    width 1, 4 and 8, C (the pairs', the Taylor method's and radau5's
-    where the scene asks for its lanes):
+    width 1, 4 and 8, C (the pairs', the Taylor method's, rodas4's and
+    radau5's where the scene asks for its lanes):
     each state's rows, log (times, events, states), statistics and code
     are its _events call's bit for bit, with a terminal event on some
     lanes only, lanes that never fire, an event at t0 (q3 = 2 there: no
@@ -872,7 +873,7 @@ def test_an_event_faster_than_the_motion_is_found_over_lanes_as_alone(
     out, scene = spinning
     comp = build.build(out, "c")
     x0 = np.array(scene.initial_state())
-    for method in ("dopri5", "dop853", "taylor"):
+    for method in ("dopri5", "dop853", "taylor", "rodas4"):
         for torque in (0.02, 0.013):
             c = comp.setup([torque])
             batch = comp.integrate_events_batch(method, np.tile(x0, (5, 1)), c,

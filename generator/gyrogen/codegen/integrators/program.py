@@ -105,6 +105,11 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
         [
             rosenbrock.lanes_step(m, g.quaternion, g.uses_time, knots=g.knots),
             rosenbrock.lanes_step(m, g.quaternion, g.uses_time, True, g.knots),
+            *(
+                [rosenbrock.lanes_step(m, g.quaternion, g.uses_time, g.events, g.knots)]
+                if g.events
+                else []
+            ),
         ],
         rosenbrock.lane_state(m, g.uses_time),
         rosenbrock.lane_start(m),
