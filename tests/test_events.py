@@ -322,7 +322,9 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
     """_events_batch, C and Fortran, on one and two threads: each state's
     rows, log, statistics and code are its _events call's bit for bit, over
     drawn spins (a terminal event for the fast ones), a NaN start, a step
-    budget some runs exhaust and logs that fill (codes 0, 2, 3, 8 and 9)."""
+    budget some runs exhaust and logs that fill (codes 0, 2, 3, 8 and 9);
+    and C's batch (over lanes) is Fortran's (a loop of single calls) bit
+    for bit."""
     builds, scene = located
     rng = np.random.default_rng(11)
     x0s = np.tile(np.array(scene.initial_state()), (13, 1))
@@ -333,7 +335,7 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
     c = builds[0].setup([])
     steps = [builds[0].integrate_events(method, x, c, times)[2] for x in x0s]
     budget = int(np.median([s["accepted"] + s["rejected"] for s in steps]))
-    codes = set()
+    codes, runs = set(), []
     for comp in builds:
         for capacity, max_steps, threads in ((3, 10**6, 1), (5, budget, 2), (0, 10**6, 1)):
             given = {"rtol": 1e-10, "atol": 1e-10, "max_steps": max_steps}
@@ -341,6 +343,7 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
             states, logs, stats, code = comp.integrate_events_batch(
                 method, x0s, c, times, threads, capacity=capacity, ends=ends, **given
             )
+            runs.append((states, ends, stats, code, logs))
             assert len(logs) == len(x0s)
             for i, x0 in enumerate(x0s):
                 end = np.empty(comp.nx)
@@ -354,6 +357,15 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
                 assert np.array_equal(logs[i].states, log.states)
             codes |= set(code.tolist())
     assert {0, 2, 3, 8, 9} <= codes, codes
+    half = len(runs) // 2
+    for c_run, f_run in zip(runs[:half], runs[half:], strict=True):  # C = Fortran
+        for a, b in zip((*c_run[:2], c_run[3]), (*f_run[:2], f_run[3]), strict=True):
+            assert np.array_equal(a, b, equal_nan=True)
+        for k in c_run[2].dtype.names:
+            assert np.array_equal(c_run[2][k], f_run[2][k], equal_nan=True), k
+        for one, other in zip(c_run[4], f_run[4], strict=True):
+            assert one.names == other.names and np.array_equal(one.times, other.times)
+            assert np.array_equal(one.states, other.states)
 
 
 def test_a_batch_takes_a_set_of_constants_per_state(
