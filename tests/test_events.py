@@ -322,7 +322,9 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
     """_events_batch, C and Fortran, on one and two threads: each state's
     rows, log, statistics and code are its _events call's bit for bit, over
     drawn spins (a terminal event for the fast ones), a NaN start, a step
-    budget some runs exhaust and logs that fill (codes 0, 2, 3, 8 and 9)."""
+    budget some runs exhaust and logs that fill (codes 0, 2, 3, 8 and 9);
+    and C's batch (over lanes) is Fortran's (a loop of single calls) bit
+    for bit."""
     builds, scene = located
     rng = np.random.default_rng(11)
     x0s = np.tile(np.array(scene.initial_state()), (13, 1))
@@ -333,7 +335,7 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
     c = builds[0].setup([])
     steps = [builds[0].integrate_events(method, x, c, times)[2] for x in x0s]
     budget = int(np.median([s["accepted"] + s["rejected"] for s in steps]))
-    codes = set()
+    codes, runs = set(), []
     for comp in builds:
         for capacity, max_steps, threads in ((3, 10**6, 1), (5, budget, 2), (0, 10**6, 1)):
             given = {"rtol": 1e-10, "atol": 1e-10, "max_steps": max_steps}
@@ -341,6 +343,7 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
             states, logs, stats, code = comp.integrate_events_batch(
                 method, x0s, c, times, threads, capacity=capacity, ends=ends, **given
             )
+            runs.append((states, ends, stats, code, logs))
             assert len(logs) == len(x0s)
             for i, x0 in enumerate(x0s):
                 end = np.empty(comp.nx)
@@ -354,6 +357,15 @@ def test_a_batch_is_its_single_calls(located: tuple[list[Compiled], Scene], meth
                 assert np.array_equal(logs[i].states, log.states)
             codes |= set(code.tolist())
     assert {0, 2, 3, 8, 9} <= codes, codes
+    half = len(runs) // 2
+    for c_run, f_run in zip(runs[:half], runs[half:], strict=True):  # C = Fortran
+        for a, b in zip((*c_run[:2], c_run[3]), (*f_run[:2], f_run[3]), strict=True):
+            assert np.array_equal(a, b, equal_nan=True)
+        for k in c_run[2].dtype.names:
+            assert np.array_equal(c_run[2][k], f_run[2][k], equal_nan=True), k
+        for one, other in zip(c_run[4], f_run[4], strict=True):
+            assert one.names == other.names and np.array_equal(one.times, other.times)
+            assert np.array_equal(one.states, other.states)
 
 
 def test_a_batch_takes_a_set_of_constants_per_state(
@@ -754,13 +766,16 @@ terminal = true
 
 @pytest.mark.parametrize(
     "method, lanes",
-    [("dop853", 1), ("dop853", 4), ("dop853", 8), ("radau5", 4),
-     pytest.param("radau5", 1, marks=WIDE), pytest.param("radau5", 8, marks=WIDE)],
+    [("dop853", 1), ("dop853", 4), ("dop853", 8), ("radau5", 4), ("taylor", 4), ("rodas4", 4),
+     pytest.param("radau5", 1, marks=WIDE), pytest.param("radau5", 8, marks=WIDE),
+     pytest.param("taylor", 1, marks=WIDE), pytest.param("taylor", 8, marks=WIDE),
+     pytest.param("rodas4", 1, marks=WIDE), pytest.param("rodas4", 8, marks=WIDE)],
 )  # fmt: skip
 def test_a_batch_over_lanes_is_its_single_calls(tmp_path: Path, method: str, lanes: int) -> None:
     """Events on the states alone (searched at the steps' ends: a lane's
     interpolant only where it needs it) in _events_batch over lanes of
-    width 1, 4 and 8, C (radau5's where the scene asks for its lanes):
+    width 1, 4 and 8, C (the pairs', the Taylor method's, rodas4's and
+    radau5's where the scene asks for its lanes):
     each state's rows, log (times, events, states), statistics and code
     are its _events call's bit for bit, with a terminal event on some
     lanes only, lanes that never fire, an event at t0 (q3 = 2 there: no
@@ -870,7 +885,7 @@ def test_an_event_faster_than_the_motion_is_found_over_lanes_as_alone(
     out, scene = spinning
     comp = build.build(out, "c")
     x0 = np.array(scene.initial_state())
-    for method in ("dopri5", "dop853"):
+    for method in ("dopri5", "dop853", "taylor", "rodas4"):
         for torque in (0.02, 0.013):
             c = comp.setup([torque])
             batch = comp.integrate_events_batch(method, np.tile(x0, (5, 1)), c,

@@ -97,12 +97,13 @@ typedef struct {
    another): a string literal, not to be freed or changed. */
 const char *rw3_orthogonal_ode_strerror(int code);
 
-/* The _batch variants of the adaptive explicit pairs advance this many
-   trajectories at once, one in each SIMD lane of the same loops (a finished
-   lane takes the next trajectory); 8 fills two AVX2 or one AVX-512 vector of
-   doubles. Any value >= 1 gives the same results, bit for bit: each lane does
-   what the single call does for its trajectory. Define it when compiling
-   rw3_orthogonal_ode.c (-DRW3_ORTHOGONAL_LANES=4) to change it. */
+/* The batches over SIMD lanes (_batch, _grid_batch and _events_batch: the
+   comment above each in rw3_orthogonal_ode.c says whether it runs over them)
+   advance this many trajectories at once, one in each SIMD lane of the same
+   loops (a finished lane takes the next trajectory); 8 fills two AVX2 or one
+   AVX-512 vector of doubles. Any value >= 1 gives the same results, bit for
+   bit: each lane does what the single call does for its trajectory. Define
+   it when compiling rw3_orthogonal_ode.c (-DRW3_ORTHOGONAL_LANES=4) to change it. */
 #ifndef RW3_ORTHOGONAL_LANES
 #define RW3_ORTHOGONAL_LANES 8
 #endif

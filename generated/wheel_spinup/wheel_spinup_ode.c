@@ -1387,6 +1387,7 @@ struct WHEEL_SPINUP_ALIGNED lanes {
     double cap[WHEEL_SPINUP_LANES];
     double tay[21][21][WHEEL_SPINUP_LANES];
     double acc[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
+    double fend[WHEEL_SPINUP_NX][WHEEL_SPINUP_LANES];
     long g[WHEEL_SPINUP_LANES];
     long base[WHEEL_SPINUP_LANES];
     double ev_old[1][WHEEL_SPINUP_LANES];
@@ -5589,6 +5590,869 @@ static void rodas4_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
+/* One turn of rodas4_events's loop on every lane. */
+static void rodas4_events_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                     double t1, long max_steps)
+{
+    double inv_h[WHEEL_SPINUP_LANES];
+    double err[WHEEL_SPINUP_LANES];
+    double fac[WHEEL_SPINUP_LANES];
+    double gus[WHEEL_SPINUP_LANES];
+    double total[WHEEL_SPINUP_LANES];
+    int go[WHEEL_SPINUP_LANES];
+    int fresh[WHEEL_SPINUP_LANES];
+    int bad[WHEEL_SPINUP_LANES];
+    int last[WHEEL_SPINUP_LANES];
+    int retry[WHEEL_SPINUP_LANES];
+    int ok[WHEEL_SPINUP_LANES];
+    int take[WHEEL_SPINUP_LANES];
+    int lock[WHEEL_SPINUP_LANES];
+    int rej[WHEEL_SPINUP_LANES];
+    double told[WHEEL_SPINUP_LANES];
+    double hs[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_new[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_seen[1];
+    double ev_dnew[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
+    double ev_nud;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_last;
+    int ev_res;
+    static const double is_angle[8] = {1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0};
+    int ev_k, i, l;
+    int need;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        fresh[l] = L->code[l] < 0 && L->new_point[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= fresh[l];
+    }
+    if (need) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ts[l] = L->t[l];
+        }
+        jac_lanes(L->ts, L->x, c, L->J);
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->stats_jac_calls[l] = fresh[l] ? L->stats_jac_calls[l] + 1 : L->stats_jac_calls[l];
+        }
+        for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                bad[l] = fresh[l] ? (bad[l] | !(fabs(L->J[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->code[l] = fresh[l] ? (bad[l] ? WHEEL_SPINUP_ODE_ERR_NONFINITE : L->code[l]) :
+                    L->code[l];
+            L->new_point[l] = fresh[l] ? 0 : L->new_point[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->code[l] = L->code[l] < 0 ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];
+        go[l] = L->code[l] < 0;
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = go[l] && last[l] ? t1 - L->t[l] : L->h[l];
+        L->stats_h[l] = go[l] ? L->h[l] : L->stats_h[l];
+    }
+
+    /* E = I/(h gamma) - J */
+    for (i = 0; i < WHEEL_SPINUP_NX * WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->lu[i][l] = -L->J[i][l];
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->lu[i * WHEEL_SPINUP_NX + i][l] = L->lu[i * WHEEL_SPINUP_NX + i][l] + 1.0 /
+                    (L->h[l] * 0.25);
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->stats_decompositions[l] = L->stats_decompositions[l] + (go[l] ? 1 : 0);
+    }
+    lu_decompose_lanes(L);
+
+    /* a singular E: h shrunk, so many times in a row stop */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        retry[l] = go[l] && L->zero_pivot[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->singular[l] = retry[l] ? L->singular[l] + 1 : go[l] ? 0 : L->singular[l];
+        L->code[l] = retry[l] && L->singular[l] == 5 ? WHEEL_SPINUP_ODE_ERR_SINGULAR : L->code[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.5 : L->h[l];
+        go[l] = go[l] && !L->zero_pivot[l];
+    }
+
+    /* trial */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        inv_h[l] = 1.0 / L->h[l];
+    }
+
+    /* stage 1: t */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[0][i][l] = L->f0[i][l];
+        }
+    }
+    lu_solve_lanes(L, 0);
+
+    /* stage 2: t + 0.386 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.544 * L->k[0][i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.386 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[1][i][l] = L->fy[i][l] + inv_h[l] * (-5.6688 * L->k[0][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 1);
+
+    /* stage 3: t + 0.21 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 0.9466785280815826 * L->k[0][i][l] + 0.2557011698983284 *
+                    L->k[1][i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.21 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[2][i][l] = L->fy[i][l] + inv_h[l] * (-2.430093356833875 * L->k[0][i][l] -
+                    0.2063599157091915 * L->k[1][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 2);
+
+    /* stage 4: t + 0.63 h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 3.314825187068521 * L->k[0][i][l] + 2.896124015972201 *
+                    L->k[1][i][l] + 0.9986419139977817 * L->k[2][i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + 0.63 * L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[3][i][l] = L->fy[i][l] + inv_h[l] * (-0.1073529058151375 * L->k[0][i][l] -
+                    9.594562251023355 * L->k[1][i][l] - 20.47028614809616 * L->k[2][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 3);
+
+    /* stage 5: t + h */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->y[i][l] = L->x[i][l] + 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 *
+                    L->k[1][i][l] + 12.53708332932087 * L->k[2][i][l] - 0.687886036105895 *
+                    L->k[3][i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[4][i][l] = L->fy[i][l] + inv_h[l] * (7.496443313967647 * L->k[0][i][l] -
+                    10.24680431464352 * L->k[1][i][l] - 33.99990352819905 * L->k[2][i][l] +
+                    11.7089089320616 * L->k[3][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 4);
+
+    /* stage 6: t + h, on the embedded solution */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dx[i][l] = 1.221224509226641 * L->k[0][i][l] + 6.019134481288629 * L->k[1][i][l] +
+                    12.53708332932087 * L->k[2][i][l] - 0.687886036105895 * L->k[3][i][l] +
+                    L->k[4][i][l];
+            L->y[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->ts[l] = L->t[l] + L->h[l];
+    }
+    rhs_lanes(L->ts, L->y, c, L->fy);
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->k[5][i][l] = L->fy[i][l] + inv_h[l] * (8.083246795921522 * L->k[0][i][l] -
+                    7.981132988064893 * L->k[1][i][l] - 31.52159432874371 * L->k[2][i][l] +
+                    16.31930543123136 * L->k[3][i][l] - 6.058818238834054 * L->k[4][i][l]);
+        }
+    }
+    lu_solve_lanes(L, 5);
+
+    /* the new solution x + dx: the embedded one plus k_6 */
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dx[i][l] = L->dx[i][l] + L->k[5][i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dense[0][i][l] = 10.12623508344586 * L->k[0][i][l] - 7.487995877610167 *
+                    L->k[1][i][l] - 34.80091861555747 * L->k[2][i][l] - 7.992771707568823 *
+                    L->k[3][i][l] + 1.025137723295662 * L->k[4][i][l];
+            L->dense[1][i][l] = -0.6762803392801253 * L->k[0][i][l] + 6.087714651680015 *
+                    L->k[1][i][l] + 16.43084320892478 * L->k[2][i][l] + 24.76722511418386 *
+                    L->k[3][i][l] - 6.594389125716872 * L->k[4][i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (go[l] ? 5 : 0);
+        total[l] = 0.0;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            double e;
+            e = L->k[5][i][l] / (atol + rtol * (is_angle[i] * (fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])) >
+                    3.141592653589793 ? 3.141592653589793 : fabs(L->xnew[i][l]) >
+                    fabs(L->x[i][l]) ? fabs(L->xnew[i][l]) : fabs(L->x[i][l])));
+            total[l] = total[l] + e * e;
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        err[l] = sqrt(total[l] / WHEEL_SPINUP_NX);
+        bad[l] = !(fabs(err[l]) <= DBL_MAX);
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            bad[l] = (bad[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->nonfinite[l] = go[l] ? bad[l] : L->nonfinite[l];
+        ok[l] = go[l] && !L->nonfinite[l] && err[l] <= 1.0 && !last[l];
+        bad[l] = 0;
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->ts[l] = L->t[l] + L->h[l];
+        }
+        rhs_lanes(L->ts, L->xnew, c, L->fnew);
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->stats_rhs_calls[l] = ok[l] ? L->stats_rhs_calls[l] + 1 : L->stats_rhs_calls[l];
+        }
+        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                bad[l] = ok[l] ? (bad[l] | !(fabs(L->fnew[i][l]) <= DBL_MAX)) : bad[l];
+            }
+        }
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->nonfinite[l] = ok[l] ? bad[l] : L->nonfinite[l];
+        }
+    }
+
+    /* a NaN or Inf: h shrunk; else accept or reject */
+    /* pow, log, exp: scalar calls, as the single trajectory's */
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        retry[l] = go[l] && L->nonfinite[l];
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->rejected_last[l] = retry[l] ? 1 : L->rejected_last[l];
+        L->h[l] = retry[l] ? L->h[l] * 0.2 : L->h[l];
+        go[l] = go[l] && !L->nonfinite[l];
+        fac[l] = dmax(0.16666666666666666, dmin(5.0, pow(err[l], 0.25) / 0.9));  /* h / h_new */
+        take[l] = go[l] && err[l] <= 1.0;
+        rej[l] = go[l] && !(err[l] <= 1.0);
+        lock[l] = (L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) <
+                1e-6 || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l])
+                > 0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS :
+                0) || fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !lock[l];
+        gus[l] = L->h_acc[l] / L->h[l] * pow(err[l] * err[l] / L->err_acc[l], 0.25) / 0.9;
+        fac[l] = ok[l] && L->stats_accepted[l] > 0 ? dmax(fac[l], dmax(0.16666666666666666,
+                dmin(5.0, gus[l]))) : fac[l];
+        L->h_acc[l] = ok[l] ? L->h[l] : L->h_acc[l];
+        L->err_acc[l] = ok[l] ? dmax(1e-2, err[l]) : L->err_acc[l];
+        told[l] = L->t[l];
+        hs[l] = L->h[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (rej[l] ? 1 : 0);
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = L->xnew[i][l];
+                }
+                wheel_spinup_events(L->t[l], ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_end[ev_k][l] = ev_g[ev_k];
+                }
+                ev_ta = told[l];
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                if (L->ev_dold[0][l] < 0.0) {
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = L->x[i][l] * (1.0 - (told[l] + ev_del - told[l]) / hs[l]) +
+                                (told[l] + ev_del - told[l]) / hs[l] * (L->xnew[i][l] + (1.0 -
+                                (told[l] + ev_del - told[l]) / hs[l]) * (L->dense[0][i][l] +
+                                (told[l] + ev_del - told[l]) / hs[l] * L->dense[1][i][l]));
+                    }
+                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                }
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = L->x[i][l] * (1.0 - (L->t[l] + -ev_del - told[l]) / hs[l]) +
+                            (L->t[l] + -ev_del - told[l]) / hs[l] * (L->xnew[i][l] + (1.0 -
+                            (L->t[l] + -ev_del - told[l]) / hs[l]) * (L->dense[0][i][l] +
+                            (L->t[l] + -ev_del - told[l]) / hs[l] * L->dense[1][i][l]));
+                }
+                wheel_spinup_events(L->t[l] + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_end[ev_k][l]) / fabs(-ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_dend[ev_k][l] = ev_dnew[ev_k];
+                }
+            }
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l]) {
+                ev_stop = L->t[l];
+                ev_halt = -1;
+                ev_ta = told[l];
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_seen[ev_k] = 0.0;
+                    if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dold[ev_k][l];
+                    }
+                }
+                for (;;) {
+                    ev_tb = ev_ta + ev_dt;
+                    ev_last = 0;
+                    if (ev_tb >= L->t[l] || ev_tb <= ev_ta) {
+                        ev_tb = L->t[l];
+                        ev_last = 1;
+                    }
+                    if (ev_last == 0) {
+                        for (i = 7; i < 8; ++i) {
+                            ev_y[i] = L->x[i][l] * (1.0 - (ev_tb - told[l]) / hs[l]) + (ev_tb -
+                                    told[l]) / hs[l] * (L->xnew[i][l] + (1.0 - (ev_tb - told[l])
+                                    / hs[l]) * (L->dense[0][i][l] + (ev_tb - told[l]) / hs[l] *
+                                    L->dense[1][i][l]));
+                        }
+                        wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = ev_g[ev_k];
+                        }
+                        for (i = 7; i < 8; ++i) {
+                            ev_y[i] = L->x[i][l] * (1.0 - (ev_tb + -ev_del - told[l]) / hs[l]) +
+                                    (ev_tb + -ev_del - told[l]) / hs[l] * (L->xnew[i][l] + (1.0 -
+                                    (ev_tb + -ev_del - told[l]) / hs[l]) * (L->dense[0][i][l] +
+                                    (ev_tb + -ev_del - told[l]) / hs[l] * L->dense[1][i][l]));
+                        }
+                        wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
+                        }
+                    } else {
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = L->ev_end[ev_k][l];
+                            ev_dnew[ev_k] = L->ev_dend[ev_k][l];
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
+                        }
+                    }
+                    ev_res = 1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((L->ev_old[ev_k][l] < 0.0 &&
+                                ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k]
+                                < 0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) +
+                                fabs(ev_new[ev_k])) || (ev_tb - ev_ta) * L->ev_rate[ev_k][l] >
+                                ((L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] > 0.0) ||
+                                (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                                (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))) {
+                            ev_res = 0;
+                        }
+                    }
+                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05 && ev_ta +
+                            0.5 * ev_dt > ev_ta) {
+                        ev_dt = 0.5 * ev_dt;
+                        continue;
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_t[ev_k] = DBL_MAX;
+                        if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] >=
+                                0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                ev_new[ev_k] <= 0.0)) {
+                            ev_a = ev_ta;
+                            ev_b = ev_tb;
+                            ev_ga = L->ev_old[ev_k][l];
+                            ev_gb = ev_new[ev_k];
+                            ev_side = 0;
+                            ev_it = 0;
+                            ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
+                            for (;;) {
+                                if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                    ev_nud = 16.0 * ev_nud;
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (i = 7; i < 8; ++i) {
+                                    ev_y[i] = L->x[i][l] * (1.0 - (ev_m - told[l]) / hs[l]) +
+                                            (ev_m - told[l]) / hs[l] * (L->xnew[i][l] + (1.0 -
+                                            (ev_m - told[l]) / hs[l]) * (L->dense[0][i][l] +
+                                            (ev_m - told[l]) / hs[l] * L->dense[1][i][l]));
+                                }
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                ev_gm = ev_g[ev_k];
+                                if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                        0.0))) {
+                                    ev_a = ev_m;
+                                    ev_ga = ev_gm;
+                                    if (ev_side == -1) {
+                                        ev_gb = 0.5 * ev_gb;
+                                    }
+                                    ev_side = -1;
+                                } else {
+                                    ev_b = ev_m;
+                                    ev_gb = ev_gm;
+                                    if (ev_side == 1) {
+                                        ev_ga = 0.5 * ev_ga;
+                                    }
+                                    ev_side = 1;
+                                }
+                            }
+                            ev_t[ev_k] = ev_b;
+                        } else {
+                            if ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_f = ev_ta;
+                                ev_gf = L->ev_old[ev_k][l];
+                                ev_b = ev_tb;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                    if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (i = 7; i < 8; ++i) {
+                                        ev_y[i] = L->x[i][l] * (1.0 - (ev_m - told[l]) / hs[l]) +
+                                                (ev_m - told[l]) / hs[l] * (L->xnew[i][l] + (1.0
+                                                - (ev_m - told[l]) / hs[l]) * (L->dense[0][i][l]
+                                                + (ev_m - told[l]) / hs[l] * L->dense[1][i][l]));
+                                    }
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_b = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_gf >=
+                                        0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                        ev_gf <= 0.0)) {
+                                    ev_a = ev_ta;
+                                    ev_b = ev_f;
+                                    ev_ga = L->ev_old[ev_k][l];
+                                    ev_gb = ev_gf;
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (i = 7; i < 8; ++i) {
+                                            ev_y[i] = L->x[i][l] * (1.0 - (ev_m - told[l]) /
+                                                    hs[l]) + (ev_m - told[l]) / hs[l] *
+                                                    (L->xnew[i][l] + (1.0 - (ev_m - told[l]) /
+                                                    hs[l]) * (L->dense[0][i][l] + (ev_m -
+                                                    told[l]) / hs[l] * L->dense[1][i][l]));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
+                            } else {
+                                if (!(fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && (fabs(ev_new[ev_k])
+                                        <= DBL_MAX)) {
+                                    ev_a = ev_ta;
+                                    ev_f = ev_tb;
+                                    ev_gf = ev_new[ev_k];
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                        if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                            break;
+                                        }
+                                        for (i = 7; i < 8; ++i) {
+                                            ev_y[i] = L->x[i][l] * (1.0 - (ev_m - told[l]) /
+                                                    hs[l]) + (ev_m - told[l]) / hs[l] *
+                                                    (L->xnew[i][l] + (1.0 - (ev_m - told[l]) /
+                                                    hs[l]) * (L->dense[0][i][l] + (ev_m -
+                                                    told[l]) / hs[l] * L->dense[1][i][l]));
+                                        }
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                            ev_f = ev_m;
+                                            ev_gf = ev_g[ev_k];
+                                        } else {
+                                            ev_a = ev_m;
+                                        }
+                                    }
+                                    if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >=
+                                            0.0) || (ev_dir[ev_k] != 1 && ev_gf > 0.0 &&
+                                            ev_new[ev_k] <= 0.0)) {
+                                        ev_a = ev_f;
+                                        ev_b = ev_tb;
+                                        ev_ga = ev_gf;
+                                        ev_gb = ev_new[ev_k];
+                                        ev_side = 0;
+                                        ev_it = 0;
+                                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a),
+                                                fabs(ev_b));
+                                        for (;;) {
+                                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                                break;
+                                            }
+                                            ev_it = ev_it + 1;
+                                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                                ev_nud = 16.0 * ev_nud;
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                break;
+                                            }
+                                            for (i = 7; i < 8; ++i) {
+                                                ev_y[i] = L->x[i][l] * (1.0 - (ev_m - told[l]) /
+                                                        hs[l]) + (ev_m - told[l]) / hs[l] *
+                                                        (L->xnew[i][l] + (1.0 - (ev_m - told[l])
+                                                        / hs[l]) * (L->dense[0][i][l] + (ev_m -
+                                                        told[l]) / hs[l] * L->dense[1][i][l]));
+                                            }
+                                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                            ev_gm = ev_g[ev_k];
+                                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0)
+                                                    && !(ev_ga > 0.0))) {
+                                                ev_a = ev_m;
+                                                ev_ga = ev_gm;
+                                                if (ev_side == -1) {
+                                                    ev_gb = 0.5 * ev_gb;
+                                                }
+                                                ev_side = -1;
+                                            } else {
+                                                ev_b = ev_m;
+                                                ev_gb = ev_gm;
+                                                if (ev_side == 1) {
+                                                    ev_ga = 0.5 * ev_ga;
+                                                }
+                                                ev_side = 1;
+                                            }
+                                        }
+                                        ev_t[ev_k] = ev_b;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    for (;;) {
+                        ev_best = -1;
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] <
+                                    ev_t[ev_best])) {
+                                ev_best = ev_k;
+                            }
+                        }
+                        if (ev_best < 0) {
+                            break;
+                        }
+                        if (L->nlog[l] >= L->capacity) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                            break;
+                        }
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            ev_y[i] = L->x[i][l] * (1.0 - (ev_t[ev_best] - told[l]) / hs[l]) +
+                                    (ev_t[ev_best] - told[l]) / hs[l] * (L->xnew[i][l] + (1.0 -
+                                    (ev_t[ev_best] - told[l]) / hs[l]) * (L->dense[0][i][l] +
+                                    (ev_t[ev_best] - told[l]) / hs[l] * L->dense[1][i][l]));
+                        }
+                        L->log_t[L->lbase[l] + L->nlog[l]] = ev_t[ev_best];
+                        L->log_k[L->lbase[l] + L->nlog[l]] = ev_best;
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            L->log_x[L->lbase[l] + L->nlog[l]][i] = ev_y[i];
+                        }
+                        L->nlog[l] = L->nlog[l] + 1;
+                        if (ev_term[ev_best] != 0) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                            break;
+                        }
+                        ev_t[ev_best] = DBL_MAX;
+                    }
+                    if (ev_halt >= 0) {
+                        break;
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_old[ev_k][l] = ev_new[ev_k];
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                    if (ev_last != 0) {
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            L->ev_rate[ev_k][l] = ev_seen[ev_k];
+                        }
+                        break;
+                    }
+                    ev_ta = ev_tb;
+                    if (ev_res != 0) {
+                        ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                    }
+                }
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < ev_stop)) {
+                        break;
+                    }
+                    frac[l] = (L->times[L->g[l]] - told[l]) / hs[l];
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] * (1.0 - frac[l]) + frac[l]
+                                * (L->xnew[i][l] + (1.0 - frac[l]) * (L->dense[0][i][l] + frac[l]
+                                * L->dense[1][i][l]));
+                    }
+                    L->g[l] = L->g[l] + 1;
+                }
+                if (ev_halt >= 0) {
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        ev_y[i] = L->x[i][l] * (1.0 - (ev_stop - told[l]) / hs[l]) + (ev_stop -
+                                told[l]) / hs[l] * (L->xnew[i][l] + (1.0 - (ev_stop - told[l]) /
+                                hs[l]) * (L->dense[0][i][l] + (ev_stop - told[l]) / hs[l] *
+                                L->dense[1][i][l]));
+                    }
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        L->x[i][l] = ev_y[i];
+                    }
+                    L->t[l] = ev_stop;
+                    L->stats_t[l] = L->t[l];
+                    if (L->g[l] < L->ntimes) {
+                        if (L->times[L->g[l]] <= L->t[l]) {
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                            }
+                            L->g[l] = L->g[l] + 1;
+                        }
+                    }
+                    L->code[l] = ev_halt;
+                    ok[l] = 0;
+                }
+            }
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->code[l] = take[l] && lock[l] ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR : ok[l] &&
+                last[l] ? WHEEL_SPINUP_ODE_OK : L->code[l];
+    }
+
+    /* a branch's locals are its own over lanes: fac by selection */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        fac[l] = ok[l] && L->rejected_last[l] ? dmax(fac[l], 1.0) : fac[l];
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->f0[i][l] = ok[l] ? L->fnew[i][l] : L->f0[i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->new_point[l] = ok[l] ? 1 : L->new_point[l];
+        L->rejected_last[l] = ok[l] ? 0 : rej[l] ? 1 : L->rejected_last[l];
+        L->h[l] = go[l] ? L->h[l] / fac[l] : L->h[l];
+    }
+}
+
 /* The normalized Taylor coefficients of x and of the rhs's 53 */
 static void taylor_jet_lanes(struct lanes *L, int order, const double *c, const double *inv)
 {
@@ -6363,6 +7227,756 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
                         L->out[L->base[l] + L->g[l]][i] = L->acc[i][l];
                     }
                     L->g[l] = L->g[l] + 1;
+                }
+            }
+        }
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->comp[i][l] = ok[l] ? L->xnew[i][l] - L->x[i][l] - L->dx[i][l] : L->comp[i][l];
+            L->x[i][l] = ok[l] ? L->xnew[i][l] : L->x[i][l];
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l] && L->g[l] < L->ntimes && L->times[L->g[l]] <= L->t[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                }
+                L->g[l] = L->g[l] + 1;
+            }
+        }
+    }
+}
+
+/* One step of taylor_events on every lane. */
+static void taylor_events_step_lanes(struct lanes *L, const double *c, double rtol, double atol,
+                                     double t1, long max_steps)
+{
+    static const double inv[21] = {0.0, 1.0, 0.5, 0.3333333333333333, 0.25, 0.2,
+            0.16666666666666666, 0.14285714285714285, 0.125, 0.1111111111111111, 0.1,
+            0.09090909090909091, 0.08333333333333333, 0.07692307692307693, 0.07142857142857142,
+            0.06666666666666667, 0.0625, 0.058823529411764705, 0.05555555555555555,
+            0.05263157894736842, 0.05};
+    static const double rhofacs[21] = {0.0, 0.0, 0.06720551273974977, 0.09536916221554963,
+            0.10717059875230675, 0.11360815367076375, 0.11765484302177921, 0.12043240152376272,
+            0.12245642825298193, 0.12399674050160123, 0.12520814359063986, 0.12618578170503877,
+            0.12699134256376904, 0.12766657029576653, 0.12824072030490302, 0.12873490358780423,
+            0.1291647359223283, 0.12954201633524534, 0.12987582587444038, 0.13017326751821864,
+            0.130439976885755};
+    int order;
+    double rhofac;
+    double scale;
+    int last[WHEEL_SPINUP_LANES];
+    int run[WHEEL_SPINUP_LANES];
+    int take[WHEEL_SPINUP_LANES];
+    int ok[WHEEL_SPINUP_LANES];
+    int at[WHEEL_SPINUP_LANES];
+    int jump[WHEEL_SPINUP_LANES];
+    int retry[WHEEL_SPINUP_LANES];
+    double xmax[WHEEL_SPINUP_LANES];
+    double dp[WHEEL_SPINUP_LANES];
+    double dq[WHEEL_SPINUP_LANES];
+    double rp[WHEEL_SPINUP_LANES];
+    double rq[WHEEL_SPINUP_LANES];
+    double rho[WHEEL_SPINUP_LANES];
+    double h2[WHEEL_SPINUP_LANES];
+    double told[WHEEL_SPINUP_LANES];
+    double frac[WHEEL_SPINUP_LANES] = {0};
+    static const double ks[21] = {0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0,
+            12.0, 13.0, 14.0, 15.0, 16.0, 17.0, 18.0, 19.0, 20.0};
+    static const int ev_dir[1] = {1};
+    static const int ev_term[1] = {0};
+    double ev_new[1];
+    double ev_g[1];
+    double ev_t[1];
+    double ev_seen[1];
+    double ev_dnew[1];
+    double ev_y[WHEEL_SPINUP_NX];
+    double ev_a;
+    double ev_b;
+    double ev_ga;
+    double ev_gb;
+    double ev_m;
+    double ev_gm;
+    double ev_f;
+    double ev_gf;
+    double ev_stop;
+    double ev_ta;
+    double ev_tb;
+    double ev_dt;
+    double ev_del;
+    double ev_cap;
+    double ev_nud;
+    int ev_side;
+    int ev_best;
+    int ev_halt;
+    int ev_it;
+    int ev_last;
+    int ev_res;
+    int ev_k, i, l, q;
+    int need;
+
+    /* the order: min_order plus the thresholds e^(-2 (q - 1)) above rtol */
+    order = 2;
+    order = order + (0.1353352832366127 > rtol ? 1 : 0);
+    order = order + (0.01831563888873418 > rtol ? 1 : 0);
+    order = order + (0.0024787521766663585 > rtol ? 1 : 0);
+    order = order + (0.00033546262790251185 > rtol ? 1 : 0);
+    order = order + (4.5399929762484854e-05 > rtol ? 1 : 0);
+    order = order + (6.14421235332821e-06 > rtol ? 1 : 0);
+    order = order + (8.315287191035679e-07 > rtol ? 1 : 0);
+    order = order + (1.1253517471925912e-07 > rtol ? 1 : 0);
+    order = order + (1.522997974471263e-08 > rtol ? 1 : 0);
+    order = order + (2.061153622438558e-09 > rtol ? 1 : 0);
+    order = order + (2.7894680928689246e-10 > rtol ? 1 : 0);
+    order = order + (3.775134544279098e-11 > rtol ? 1 : 0);
+    order = order + (5.109089028063325e-12 > rtol ? 1 : 0);
+    order = order + (6.914400106940203e-13 > rtol ? 1 : 0);
+    order = order + (9.357622968840175e-14 > rtol ? 1 : 0);
+    order = order + (1.2664165549094176e-14 > rtol ? 1 : 0);
+    order = order + (1.713908431542013e-15 > rtol ? 1 : 0);
+    order = order + (2.3195228302435696e-16 > rtol ? 1 : 0);
+    rhofac = rhofacs[order];
+    scale = atol / rtol;
+
+    /* the coefficients at x, and the step they allow (Jorba and Zou) */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        run[l] = L->code[l] < 0;
+    }
+    taylor_jet_lanes(L, order, c, inv);
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->stats_rhs_calls[l] = L->stats_rhs_calls[l] + (run[l] ? 1 : 0);
+        rp[l] = DBL_MAX;
+        rq[l] = DBL_MAX;
+    }
+
+    /* the bound the attitude set */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = 0.0;
+    }
+    for (i = 0; i < 3; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 0; i < 3; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
+            dq[l] = fabs(L->tay[order - 1][i][l]) > dq[l] ? fabs(L->tay[order - 1][i][l]) : dq[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rp[l] = xmax[l] / dp[l] < rp[l] ? xmax[l] / dp[l] : rp[l];
+        rq[l] = xmax[l] / dq[l] < rq[l] ? xmax[l] / dq[l] : rq[l];
+    }
+
+    /* the bound the rotor angles set */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = 0.0;
+    }
+    for (i = 3; i < 4; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            xmax[l] = (fabs(L->x[i][l]) > 3.141592653589793 ? 3.141592653589793 :
+                    fabs(L->x[i][l])) > xmax[l] ? (fabs(L->x[i][l]) > 3.141592653589793 ?
+                    3.141592653589793 : fabs(L->x[i][l])) : xmax[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 3; i < 4; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
+            dq[l] = fabs(L->tay[order - 1][i][l]) > dq[l] ? fabs(L->tay[order - 1][i][l]) : dq[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rp[l] = xmax[l] / dp[l] < rp[l] ? xmax[l] / dp[l] : rp[l];
+        rq[l] = xmax[l] / dq[l] < rq[l] ? xmax[l] / dq[l] : rq[l];
+    }
+
+    /* the bound the carrier rates set */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = 0.0;
+    }
+    for (i = 4; i < 7; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            xmax[l] = fabs(L->x[i][l]) > xmax[l] ? fabs(L->x[i][l]) : xmax[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        dp[l] = 0.0;
+        dq[l] = 0.0;
+    }
+    for (i = 4; i < 7; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            dp[l] = fabs(L->tay[order][i][l]) > dp[l] ? fabs(L->tay[order][i][l]) : dp[l];
+            dq[l] = fabs(L->tay[order - 1][i][l]) > dq[l] ? fabs(L->tay[order - 1][i][l]) : dq[l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        xmax[l] = dmax(scale, xmax[l]);  /* the absolute and relative modes in one */
+        rp[l] = xmax[l] / dp[l] < rp[l] ? xmax[l] / dp[l] : rp[l];
+        rq[l] = xmax[l] / dq[l] < rq[l] ? xmax[l] / dq[l] : rq[l];
+        rho[l] = step_exp2(dmin(step_log2(rp[l]) * inv[order], step_log2(rq[l]) * inv[order - 1]));
+        L->h[l] = dmin(dmin(rho[l] * rhofac, t1 - L->t[l]), L->cap[l]);
+        last[l] = L->t[l] + 1.01 * L->h[l] >= t1;
+        L->h[l] = last[l] ? t1 - L->t[l] : L->h[l];
+        told[l] = L->t[l];
+        L->stats_h[l] = run[l] ? L->h[l] : L->stats_h[l];
+        L->code[l] = run[l] ? (step_underflow(L->h[l],
+                L->t[l]) ? (L->nonfinite[l] ? WHEEL_SPINUP_ODE_ERR_NONFINITE :
+                WHEEL_SPINUP_ODE_ERR_STEP_UNDERFLOW) : L->stats_accepted[l] +
+                L->stats_rejected[l] >= max_steps ? WHEEL_SPINUP_ODE_ERR_MAX_STEPS : -1) :
+                L->code[l];  /* lost in t, or no steps left */
+        run[l] = L->code[l] < 0;
+    }
+
+    /* x(t + h) by Horner's scheme two orders a turn, less what the last add lost */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        h2[l] = L->h[l] * L->h[l];
+    }
+    for (i = 0; i < 7; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->xnew[i][l] = L->tay[order][i][l];
+            L->fend[i][l] = ks[order] * L->tay[order][i][l];
+        }
+    }
+    for (q = 0; q < (order - 1) / 2; ++q) {
+        for (i = 0; i < 7; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                L->xnew[i][l] = L->tay[order - 2 * q - 2][i][l] + L->h[l] * L->tay[order - 2 * q
+                        - 1][i][l] + h2[l] * L->xnew[i][l];
+                L->fend[i][l] = ks[order - 2 * q - 2] * L->tay[order - 2 * q - 2][i][l] + L->h[l]
+                        * (ks[order - 2 * q - 1] * L->tay[order - 2 * q - 1][i][l]) + h2[l] *
+                        L->fend[i][l];
+            }
+        }
+    }
+    for (q = 0; q < order - 1 - 2 * ((order - 1) / 2); ++q) {
+        for (i = 0; i < 7; ++i) {
+            WHEEL_SPINUP_SIMD
+            for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+                L->xnew[i][l] = L->tay[1][i][l] + L->h[l] * L->xnew[i][l];
+                L->fend[i][l] = L->tay[1][i][l] + L->h[l] * L->fend[i][l];
+            }
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->xnew[7][l] = L->tay[1][7][l];
+        L->fend[7][l] = L->tay[1][7][l];
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->dx[i][l] = L->h[l] * L->xnew[i][l] - L->comp[i][l];
+            L->xnew[i][l] = L->x[i][l] + L->dx[i][l];
+        }
+    }
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        L->nonfinite[l] = 0;
+    }
+    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+        WHEEL_SPINUP_SIMD
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            L->nonfinite[l] = (L->nonfinite[l] | !(fabs(L->xnew[i][l]) <= DBL_MAX));
+        }
+    }
+
+    /* accept, or retry with h halved: a NaN or Inf, or a step past gimbal lock */
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        take[l] = run[l] && !L->nonfinite[l];
+        at[l] = L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) < 1e-6
+                || L->xnew[1][l] * 0.3183098861837907 + 0.5 - gimbal_interval(L->xnew[1][l]) >
+                0.999999 || !(fabs(L->xnew[1][l]) < 1000000.0) ?
+                fabs(wheel_spinup_cos_lanes(L->xnew[1][l])) < WHEEL_SPINUP_ODE_GIMBAL_LOCK_COS : 0;
+        jump[l] = fabs(gimbal_interval(L->x[1][l]) - gimbal_interval(L->xnew[1][l])) >= 1.0;
+        ok[l] = take[l] && !at[l] && !jump[l];
+        retry[l] = run[l] && (L->nonfinite[l] | jump[l]);  /* past gimbal lock, or not finite */
+        L->code[l] = take[l] && at[l] && !jump[l] ? WHEEL_SPINUP_ODE_ERR_ATTITUDE_SINGULAR :
+                ok[l] && last[l] ? WHEEL_SPINUP_ODE_OK : L->code[l];
+        L->t[l] = ok[l] ? (last[l] ? t1 : L->t[l] + L->h[l]) : L->t[l];
+        L->stats_t[l] = L->t[l];
+        L->stats_accepted[l] = L->stats_accepted[l] + (ok[l] ? 1 : 0);
+        L->stats_rejected[l] = L->stats_rejected[l] + (retry[l] ? 1 : 0);
+        L->cap[l] = ok[l] ? DBL_MAX : retry[l] ? L->h[l] * 0.5 : L->cap[l];
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l]) {
+                for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                    ev_y[i] = L->xnew[i][l];
+                }
+                wheel_spinup_events(L->t[l], ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_end[ev_k][l] = ev_g[ev_k];
+                }
+                ev_ta = told[l];
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                if (L->ev_dold[0][l] < 0.0) {
+                    for (i = 7; i < 8; ++i) {
+                        ev_y[i] = L->x[i][l] + ev_del * L->tay[1][i][l];
+                    }
+                    wheel_spinup_events(told[l] + ev_del, ev_y, c, ev_g);
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_old[ev_k][l]) / fabs(ev_del);
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                }
+                for (i = 7; i < 8; ++i) {
+                    ev_y[i] = L->xnew[i][l] + -ev_del * L->fend[i][l];
+                }
+                wheel_spinup_events(L->t[l] + -ev_del, ev_y, c, ev_g);
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_dnew[ev_k] = fabs(ev_g[ev_k] - L->ev_end[ev_k][l]) / fabs(-ev_del);
+                }
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    L->ev_dend[ev_k][l] = ev_dnew[ev_k];
+                }
+            }
+        }
+    }
+    need = 0;
+    WHEEL_SPINUP_SIMD
+    for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+        need |= ok[l];
+    }
+    if (need) {
+        for (l = 0; l < WHEEL_SPINUP_LANES; ++l) {
+            if (ok[l]) {
+                ev_stop = L->t[l];
+                ev_halt = -1;
+                ev_ta = told[l];
+                ev_cap = (L->t[l] - told[l]) * 1.0;
+                ev_dt = ev_cap;
+                ev_del = (L->t[l] - told[l]) * 1.52587890625e-05;
+                for (ev_k = 0; ev_k < 1; ++ev_k) {
+                    ev_seen[ev_k] = 0.0;
+                    if (L->ev_dold[ev_k][l] > ev_seen[ev_k]) {
+                        ev_seen[ev_k] = L->ev_dold[ev_k][l];
+                    }
+                }
+                for (;;) {
+                    ev_tb = ev_ta + ev_dt;
+                    ev_last = 0;
+                    if (ev_tb >= L->t[l] || ev_tb <= ev_ta) {
+                        ev_tb = L->t[l];
+                        ev_last = 1;
+                    }
+                    if (ev_last == 0) {
+                        for (q = 0; q < order - 1; ++q) {
+                        }
+                        ev_y[7] = L->x[7][l] + (ev_tb - told[l]) * L->tay[1][7][l];
+                        wheel_spinup_events(ev_tb, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = ev_g[ev_k];
+                        }
+                        for (q = 0; q < order - 1; ++q) {
+                        }
+                        ev_y[7] = L->x[7][l] + (ev_tb + -ev_del - told[l]) * L->tay[1][7][l];
+                        wheel_spinup_events(ev_tb + -ev_del, ev_y, c, ev_g);
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_dnew[ev_k] = fabs(ev_g[ev_k] - ev_new[ev_k]) / fabs(-ev_del);
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
+                        }
+                    } else {
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            ev_new[ev_k] = L->ev_end[ev_k][l];
+                            ev_dnew[ev_k] = L->ev_dend[ev_k][l];
+                            if (ev_dnew[ev_k] > ev_seen[ev_k]) {
+                                ev_seen[ev_k] = ev_dnew[ev_k];
+                            }
+                        }
+                    }
+                    ev_res = 1;
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        if ((ev_tb - ev_ta) * ev_seen[ev_k] > ((L->ev_old[ev_k][l] < 0.0 &&
+                                ev_new[ev_k] > 0.0) || (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k]
+                                < 0.0) ? 2.0 : 1.0) * (fabs(L->ev_old[ev_k][l]) +
+                                fabs(ev_new[ev_k])) || (ev_tb - ev_ta) * L->ev_rate[ev_k][l] >
+                                ((L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] > 0.0) ||
+                                (L->ev_old[ev_k][l] > 0.0 && ev_new[ev_k] < 0.0) ? 2.0 : 1.0) *
+                                (fabs(L->ev_old[ev_k][l]) + fabs(ev_new[ev_k]))) {
+                            ev_res = 0;
+                        }
+                    }
+                    if (ev_res == 0 && ev_dt > (L->t[l] - told[l]) * 1.52587890625e-05 && ev_ta +
+                            0.5 * ev_dt > ev_ta) {
+                        ev_dt = 0.5 * ev_dt;
+                        continue;
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        ev_t[ev_k] = DBL_MAX;
+                        if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_new[ev_k] >=
+                                0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                ev_new[ev_k] <= 0.0)) {
+                            ev_a = ev_ta;
+                            ev_b = ev_tb;
+                            ev_ga = L->ev_old[ev_k][l];
+                            ev_gb = ev_new[ev_k];
+                            ev_side = 0;
+                            ev_it = 0;
+                            ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
+                            for (;;) {
+                                if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                    break;
+                                }
+                                ev_it = ev_it + 1;
+                                ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                    ev_nud = 16.0 * ev_nud;
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                }
+                                if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                    break;
+                                }
+                                for (q = 0; q < order - 1; ++q) {
+                                }
+                                ev_y[7] = L->x[7][l] + (ev_m - told[l]) * L->tay[1][7][l];
+                                wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                ev_gm = ev_g[ev_k];
+                                if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) && !(ev_ga >
+                                        0.0))) {
+                                    ev_a = ev_m;
+                                    ev_ga = ev_gm;
+                                    if (ev_side == -1) {
+                                        ev_gb = 0.5 * ev_gb;
+                                    }
+                                    ev_side = -1;
+                                } else {
+                                    ev_b = ev_m;
+                                    ev_gb = ev_gm;
+                                    if (ev_side == 1) {
+                                        ev_ga = 0.5 * ev_ga;
+                                    }
+                                    ev_side = 1;
+                                }
+                            }
+                            ev_t[ev_k] = ev_b;
+                        } else {
+                            if ((fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && !(fabs(ev_new[ev_k]) <=
+                                    DBL_MAX)) {
+                                ev_f = ev_ta;
+                                ev_gf = L->ev_old[ev_k][l];
+                                ev_b = ev_tb;
+                                ev_it = 0;
+                                for (;;) {
+                                    if (ev_it >= 200) {
+                                        break;
+                                    }
+                                    ev_it = ev_it + 1;
+                                    ev_m = ev_f + 0.5 * (ev_b - ev_f);
+                                    if (!(ev_m > ev_f && ev_m < ev_b)) {
+                                        break;
+                                    }
+                                    for (q = 0; q < order - 1; ++q) {
+                                    }
+                                    ev_y[7] = L->x[7][l] + (ev_m - told[l]) * L->tay[1][7][l];
+                                    wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                    if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                        ev_f = ev_m;
+                                        ev_gf = ev_g[ev_k];
+                                    } else {
+                                        ev_b = ev_m;
+                                    }
+                                }
+                                if ((ev_dir[ev_k] != -1 && L->ev_old[ev_k][l] < 0.0 && ev_gf >=
+                                        0.0) || (ev_dir[ev_k] != 1 && L->ev_old[ev_k][l] > 0.0 &&
+                                        ev_gf <= 0.0)) {
+                                    ev_a = ev_ta;
+                                    ev_b = ev_f;
+                                    ev_ga = L->ev_old[ev_k][l];
+                                    ev_gb = ev_gf;
+                                    ev_side = 0;
+                                    ev_it = 0;
+                                    ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a), fabs(ev_b));
+                                    for (;;) {
+                                        if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                            ev_nud = 16.0 * ev_nud;
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                        }
+                                        if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                            break;
+                                        }
+                                        for (q = 0; q < order - 1; ++q) {
+                                        }
+                                        ev_y[7] = L->x[7][l] + (ev_m - told[l]) * L->tay[1][7][l];
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        ev_gm = ev_g[ev_k];
+                                        if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0) &&
+                                                !(ev_ga > 0.0))) {
+                                            ev_a = ev_m;
+                                            ev_ga = ev_gm;
+                                            if (ev_side == -1) {
+                                                ev_gb = 0.5 * ev_gb;
+                                            }
+                                            ev_side = -1;
+                                        } else {
+                                            ev_b = ev_m;
+                                            ev_gb = ev_gm;
+                                            if (ev_side == 1) {
+                                                ev_ga = 0.5 * ev_ga;
+                                            }
+                                            ev_side = 1;
+                                        }
+                                    }
+                                    ev_t[ev_k] = ev_b;
+                                }
+                            } else {
+                                if (!(fabs(L->ev_old[ev_k][l]) <= DBL_MAX) && (fabs(ev_new[ev_k])
+                                        <= DBL_MAX)) {
+                                    ev_a = ev_ta;
+                                    ev_f = ev_tb;
+                                    ev_gf = ev_new[ev_k];
+                                    ev_it = 0;
+                                    for (;;) {
+                                        if (ev_it >= 200) {
+                                            break;
+                                        }
+                                        ev_it = ev_it + 1;
+                                        ev_m = ev_a + 0.5 * (ev_f - ev_a);
+                                        if (!(ev_m > ev_a && ev_m < ev_f)) {
+                                            break;
+                                        }
+                                        for (q = 0; q < order - 1; ++q) {
+                                        }
+                                        ev_y[7] = L->x[7][l] + (ev_m - told[l]) * L->tay[1][7][l];
+                                        wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                        if ((fabs(ev_g[ev_k]) <= DBL_MAX)) {
+                                            ev_f = ev_m;
+                                            ev_gf = ev_g[ev_k];
+                                        } else {
+                                            ev_a = ev_m;
+                                        }
+                                    }
+                                    if ((ev_dir[ev_k] != -1 && ev_gf < 0.0 && ev_new[ev_k] >=
+                                            0.0) || (ev_dir[ev_k] != 1 && ev_gf > 0.0 &&
+                                            ev_new[ev_k] <= 0.0)) {
+                                        ev_a = ev_f;
+                                        ev_b = ev_tb;
+                                        ev_ga = ev_gf;
+                                        ev_gb = ev_new[ev_k];
+                                        ev_side = 0;
+                                        ev_it = 0;
+                                        ev_nud = 8.881784197001252e-16 * dmax(fabs(ev_a),
+                                                fabs(ev_b));
+                                        for (;;) {
+                                            if (fabs(ev_gb) <= 0.0 || ev_it >= 200) {
+                                                break;
+                                            }
+                                            ev_it = ev_it + 1;
+                                            ev_m = ev_b - ev_gb * ((ev_b - ev_a) / (ev_gb - ev_ga));
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_m >= ev_b ? ev_b - ev_nud : ev_a + ev_nud;
+                                                ev_nud = 16.0 * ev_nud;
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                ev_m = ev_a + 0.5 * (ev_b - ev_a);
+                                            }
+                                            if (!(ev_m > ev_a && ev_m < ev_b)) {
+                                                break;
+                                            }
+                                            for (q = 0; q < order - 1; ++q) {
+                                            }
+                                            ev_y[7] = L->x[7][l] + (ev_m - told[l]) *
+                                                    L->tay[1][7][l];
+                                            wheel_spinup_events(ev_m, ev_y, c, ev_g);
+                                            ev_gm = ev_g[ev_k];
+                                            if ((ev_gm > 0.0 && ev_ga > 0.0) || (!(ev_gm > 0.0)
+                                                    && !(ev_ga > 0.0))) {
+                                                ev_a = ev_m;
+                                                ev_ga = ev_gm;
+                                                if (ev_side == -1) {
+                                                    ev_gb = 0.5 * ev_gb;
+                                                }
+                                                ev_side = -1;
+                                            } else {
+                                                ev_b = ev_m;
+                                                ev_gb = ev_gm;
+                                                if (ev_side == 1) {
+                                                    ev_ga = 0.5 * ev_ga;
+                                                }
+                                                ev_side = 1;
+                                            }
+                                        }
+                                        ev_t[ev_k] = ev_b;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    for (;;) {
+                        ev_best = -1;
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            if (ev_t[ev_k] < DBL_MAX && (ev_best < 0 || ev_t[ev_k] <
+                                    ev_t[ev_best])) {
+                                ev_best = ev_k;
+                            }
+                        }
+                        if (ev_best < 0) {
+                            break;
+                        }
+                        if (L->nlog[l] >= L->capacity) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_ERR_EVENT_LOG_FULL;
+                            break;
+                        }
+                        for (i = 0; i < 7; ++i) {
+                            L->acc[i][l] = L->tay[order][i][l];
+                        }
+                        for (q = 0; q < order - 1; ++q) {
+                            for (i = 0; i < 7; ++i) {
+                                L->acc[i][l] = L->tay[order - 1 - q][i][l] + (ev_t[ev_best] -
+                                        told[l]) * L->acc[i][l];
+                            }
+                        }
+                        for (i = 0; i < 7; ++i) {
+                            ev_y[i] = L->x[i][l] + (ev_t[ev_best] - told[l]) * L->acc[i][l];
+                        }
+                        ev_y[7] = L->x[7][l] + (ev_t[ev_best] - told[l]) * L->tay[1][7][l];
+                        L->log_t[L->lbase[l] + L->nlog[l]] = ev_t[ev_best];
+                        L->log_k[L->lbase[l] + L->nlog[l]] = ev_best;
+                        for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                            L->log_x[L->lbase[l] + L->nlog[l]][i] = ev_y[i];
+                        }
+                        L->nlog[l] = L->nlog[l] + 1;
+                        if (ev_term[ev_best] != 0) {
+                            ev_stop = ev_t[ev_best];
+                            ev_halt = WHEEL_SPINUP_ODE_EVENT;
+                            break;
+                        }
+                        ev_t[ev_best] = DBL_MAX;
+                    }
+                    if (ev_halt >= 0) {
+                        break;
+                    }
+                    for (ev_k = 0; ev_k < 1; ++ev_k) {
+                        L->ev_old[ev_k][l] = ev_new[ev_k];
+                        L->ev_dold[ev_k][l] = ev_dnew[ev_k];
+                    }
+                    if (ev_last != 0) {
+                        for (ev_k = 0; ev_k < 1; ++ev_k) {
+                            L->ev_rate[ev_k][l] = ev_seen[ev_k];
+                        }
+                        break;
+                    }
+                    ev_ta = ev_tb;
+                    if (ev_res != 0) {
+                        ev_dt = dmin(2.0 * ev_dt, ev_cap);
+                    }
+                }
+                for (;;) {
+                    if (!(L->g[l] < L->ntimes)) {
+                        break;
+                    }
+                    if (!(L->times[L->g[l]] < ev_stop)) {
+                        break;
+                    }
+                    frac[l] = L->times[L->g[l]] - told[l];
+                    for (i = 0; i < 7; ++i) {
+                        L->acc[i][l] = L->tay[order][i][l];
+                    }
+                    for (q = 0; q < order - 1; ++q) {
+                        for (i = 0; i < 7; ++i) {
+                            L->acc[i][l] = L->tay[order - 1 - q][i][l] + frac[l] * L->acc[i][l];
+                        }
+                    }
+                    for (i = 0; i < 7; ++i) {
+                        L->out[L->base[l] + L->g[l]][i] = L->x[i][l] + frac[l] * L->acc[i][l];
+                    }
+                    L->out[L->base[l] + L->g[l]][7] = L->x[7][l] + frac[l] * L->tay[1][7][l];
+                    L->g[l] = L->g[l] + 1;
+                }
+                if (ev_halt >= 0) {
+                    for (i = 0; i < 7; ++i) {
+                        L->acc[i][l] = L->tay[order][i][l];
+                    }
+                    for (q = 0; q < order - 1; ++q) {
+                        for (i = 0; i < 7; ++i) {
+                            L->acc[i][l] = L->tay[order - 1 - q][i][l] + (ev_stop - told[l]) *
+                                    L->acc[i][l];
+                        }
+                    }
+                    for (i = 0; i < 7; ++i) {
+                        ev_y[i] = L->x[i][l] + (ev_stop - told[l]) * L->acc[i][l];
+                    }
+                    ev_y[7] = L->x[7][l] + (ev_stop - told[l]) * L->tay[1][7][l];
+                    for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                        L->x[i][l] = ev_y[i];
+                    }
+                    L->t[l] = ev_stop;
+                    L->stats_t[l] = L->t[l];
+                    if (L->g[l] < L->ntimes) {
+                        if (L->times[L->g[l]] <= L->t[l]) {
+                            for (i = 0; i < WHEEL_SPINUP_NX; ++i) {
+                                L->out[L->base[l] + L->g[l]][i] = L->x[i][l];
+                            }
+                            L->g[l] = L->g[l] + 1;
+                        }
+                    }
+                    L->code[l] = ev_halt;
+                    ok[l] = 0;
                 }
             }
         }
@@ -10470,8 +12084,9 @@ int wheel_spinup_rodas4_events(long ntimes, const double *times, double *x, cons
             (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Each state its _events call, with its own log
-   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+/* NULL stats or codes: not wanted. Each state its _events, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]), WHEEL_SPINUP_LANES states at
+   once in SIMD lanes (the search lane by lane); every core under OpenMP. */
 size_t wheel_spinup_rodas4_events_batch(size_t n, long ntimes, const double *times, double *x,
                                         const double *c, double rtol, double atol, double h0,
                                         long max_steps, double *out, long capacity,
@@ -10480,6 +12095,12 @@ size_t wheel_spinup_rodas4_events_batch(size_t n, long ntimes, const double *tim
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(rodas4_events_step_lanes, 4, WHEEL_SPINUP_ODE_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+                          (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif
@@ -14220,8 +15841,9 @@ int wheel_spinup_taylor_events(long ntimes, const double *times, double *x, cons
             (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats ? stats : &own);
 }
 
-/* NULL stats or codes: not wanted. Each state its _events call, with its own log
-   (capacity entries a state: log_t[i*capacity + e], nlog[i]); every core under OpenMP. */
+/* NULL stats or codes: not wanted. Each state its _events, with its own log
+   (capacity entries a state: log_t[i*capacity + e], nlog[i]), WHEEL_SPINUP_LANES states at
+   once in SIMD lanes (the search lane by lane); every core under OpenMP. */
 size_t wheel_spinup_taylor_events_batch(size_t n, long ntimes, const double *times, double *x,
                                         const double *c, double rtol, double atol, double h0,
                                         long max_steps, double *out, long capacity,
@@ -14230,6 +15852,12 @@ size_t wheel_spinup_taylor_events_batch(size_t n, long ntimes, const double *tim
 {
     size_t failed = 0;
     long i;
+    if (n > 1 && grid_ok(ntimes, times)) {
+        return pair_batch(taylor_events_step_lanes, 0, WHEEL_SPINUP_ODE_TAYLOR_MIN_RTOL,
+                          n, times[0], times[ntimes - 1], x, c, rtol, atol, h0, max_steps, ntimes,
+                          times, (double (*)[WHEEL_SPINUP_NX])out, capacity, log_t, log_k,
+                          (double (*)[WHEEL_SPINUP_NX])log_x, nlog, stats, codes);
+    }
 #ifdef _OPENMP
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : failed) if (n > 1)
 #endif

@@ -105,6 +105,11 @@ def _rosenbrock(m: Method, g: Given) -> Parts:
         [
             rosenbrock.lanes_step(m, g.quaternion, g.uses_time, knots=g.knots),
             rosenbrock.lanes_step(m, g.quaternion, g.uses_time, True, g.knots),
+            *(
+                [rosenbrock.lanes_step(m, g.quaternion, g.uses_time, g.events, g.knots)]
+                if g.events
+                else []
+            ),
         ],
         rosenbrock.lane_state(m, g.uses_time),
         rosenbrock.lane_start(m),
@@ -148,8 +153,9 @@ def _taylor(m: Method, g: Given) -> Parts:
             taylor_jet.jet_lanes(m, g.jet),
             taylor.lanes_step(m, g.jet, g.quaternion),
             taylor.lanes_step(m, g.jet, g.quaternion, grid=True),
+            *([taylor.lanes_step(m, g.jet, g.quaternion, g.events)] if g.events else []),
         ],
-        taylor.lane_state(m, g.jet),
+        taylor.lane_state(m, g.jet, g.events is not None),
         [s for s in taylor.start_state() if s not in common_start],
     )
 

@@ -321,7 +321,11 @@ def lanes_point(uses_time: bool) -> list[S]:
 
 
 def lanes_step(
-    m: Method, quaternion: bool, uses_time: bool, grid: bool = False, knots: driver.Knots = ()
+    m: Method,
+    quaternion: bool,
+    uses_time: bool,
+    grid: bool | driver.Grid = False,
+    knots: driver.Knots = (),
 ) -> Func:
     """m.name_step_lanes: one turn of m.name_integrate's loop on every lane,
     each branch a selection (a lane that stopped, or whose E is singular or
@@ -331,7 +335,8 @@ def lanes_step(
     m.name_integrate's steps bit for bit. With grid,
     m.name_grid_step_lanes: m.name_grid's (the grid and the interpolant's
     rows in the struct, driver.lane_grid_state; the grid's writes lane by
-    lane, driver.passed)."""
+    lane, driver.passed); with events, m.name_events_step_lanes:
+    m.name_events's (_accepted: driver.lane_events)."""
     R, ctl = m.tableau, m.control
     assert isinstance(R, Rosenbrock) and isinstance(ctl, registry.RosenbrockControl)
     names = "code go bad last retry ok take lock rej err fac rejected_last singular t1"
@@ -405,9 +410,7 @@ def lanes_step(
         assign(lock, Bool(False) if quaternion else locked(x, xnew)),
         assign(ok, and_(take, not_(lock))),
         *control.predictive_selected(ok, fac, err),
-        *(driver.passed(ok, interpolant(R), sel(last, t1, t + h), t, h, row) if grid else []),
-        If(ok, tuple(accepted(quaternion))),
-        *driver.counted(ok, rej, last),
+        *_accepted(R, quaternion, grid, ok, rej, last, cd, row),
         *(driver.reached(row, ok) if grid else []),
         assign(cd, driver.ended(and_(take, lock), ok, last, cd)),
         Comment("a branch's locals are its own over lanes: fac by selection"),
@@ -423,6 +426,25 @@ def lanes_step(
                *(Decl(n, "bool", (), "inout") for n in STEP_BOOLS),
                *driver.knot_locals(knots))  # fmt: skip
     return driver.step_lanes(m, body, locals_, grid)
+
+
+def _accepted(R: Rosenbrock, quaternion: bool, grid: bool | driver.Grid, ok: Var, rej: Var,
+              last: Var, cd: Var, row: E) -> list[S]:  # fmt: skip
+    """A turn's acceptance over lanes: the grid times the step passes, x :=
+    xnew and the step counted; with events, the step counted first (its
+    start and size kept, driver.grid_step), then its events (a stop at one
+    sets the lane's code and clears ok), then x := xnew."""
+    if isinstance(grid, driver.Grid) and grid.events:
+        told, hs = Var("told"), Var("hs")
+        return [
+            *driver.grid_step(t, h),
+            *driver.counted(ok, rej, last),
+            *driver.lane_events(grid, interpolant(R), ok, cd, t, told, hs, row),
+            If(ok, tuple(accepted(quaternion))),
+        ]
+    end = sel(last, Var("t1"), t + h)
+    passed = driver.passed(ok, interpolant(R), end, t, h, row) if grid else []
+    return [*passed, If(ok, tuple(accepted(quaternion))), *driver.counted(ok, rej, last)]
 
 
 def lane_state(m: Method, uses_time: bool) -> list[Decl]:

@@ -274,11 +274,14 @@ def step(
         return [*body, If(ok, tuple(accepted(quaternion, known=True)))]
     taken = tuple(accepted(quaternion, known=True))
     dense, told, hs = series_output(jet, exact), Var("told"), Var("hs")
+    row = driver.BASE + driver.G if lanes else driver.G
     if isinstance(grid, driver.Grid) and grid.events:  # g's rates at the ends from x' there
         dense = replace(dense, slopes=(lambda i: T[Int(1), i], lambda i: fend[i]))
+        if lanes:  # a stop at an event sets the lane's code and clears ok
+            located = driver.lane_events(grid, dense, ok, cd, t, told, hs, row)
+            return [*body, *located, If(ok, taken), *driver.reached(row, ok)]
         inside = driver.inside(dense, t, told, hs, grid, counted=True)
         return [*body, If(ok, (*inside, *taken, *driver.reached()))]
-    row = driver.BASE + driver.G if lanes else driver.G
     passed = driver.passed(ok, dense, t, told, hs, row)
     return [*body, *passed, If(ok, taken), *driver.reached(row, ok)]
 
@@ -375,18 +378,20 @@ def integrate(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = 
         locals_ += (*jet_function(series, jet).locals, arr("acc", "inout"),
                     *driver.grid_locals(body, grid))  # fmt: skip
         if isinstance(grid, driver.Grid) and grid.events:  # x' at the step's end, k's as doubles
-            ks = tuple(float(k) for k in range(series.order + 1))
-            locals_ += (arr("fend", "inout"), Decl("ks", "double", (len(ks),), values=ks))
+            locals_ += (arr("fend", "inout"), k_table(series))
         doc = (*m.notes, *driver.GRID_DOC)
         name, params = f"taylor_{driver.variant(grid)}", driver.grid_params(grid)
         return Func(name, params, tuple(body), "int", locals_, doc)
     return Func("taylor_integrate", driver.PARAMS, tuple(body), "int", locals_, m.notes)
 
 
-def lanes_step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Func:
+def lanes_step(m: Method, jet: Jet, quaternion: bool, grid: bool | driver.Grid = False) -> Func:
     """taylor_step_lanes: one step of every lane of a struct lanes (the
     shared values computed first, the same on every lane); with grid,
-    taylor_grid_step_lanes: one step of taylor_grid."""
+    taylor_grid_step_lanes: one step of taylor_grid; with events,
+    taylor_events_step_lanes: one step of taylor_events (the events' values
+    and log in the struct, driver.lane_event_state; x' at the step's end,
+    fend, the lane's: lane_state)."""
     series = m.tableau
     assert isinstance(series, Series)
     unused = [] if reads_constants(jet) else [Unused("c")]
@@ -400,17 +405,29 @@ def lanes_step(m: Method, jet: Jet, quaternion: bool, grid: bool = False) -> Fun
         *([declare("norm")] if quaternion else []),
         *(driver.lane_grid_locals(body) if grid else ()),
     )
-    name = "taylor_grid" if grid else "taylor_integrate"
+    if isinstance(grid, driver.Grid) and grid.events:
+        locals_ += (k_table(series), *driver.lane_event_locals(grid, body))
+    name = f"taylor_{driver.variant(grid)}" if grid else "taylor_integrate"
     doc = (f"One step of {name} on every lane.",)
     return Func(f"{name.removesuffix('_integrate')}_step_lanes", driver.LANE_PARAMS, body, None,
                 locals_, doc)  # fmt: skip
 
 
-def lane_state(m: Method, jet: Jet) -> list[Decl]:
-    """What struct lanes holds per lane for a Taylor method, beyond a pair's."""
+def k_table(series: Series) -> Decl:
+    """k by order k, as doubles: x' at the step's end from the series."""
+    return Decl(
+        "ks", "double", (series.order + 1,), values=tuple(map(float, range(series.order + 1)))
+    )
+
+
+def lane_state(m: Method, jet: Jet, events: bool = False) -> list[Decl]:
+    """What struct lanes holds per lane for a Taylor method, beyond a pair's
+    (with events, x' at the step's end)."""
     series = m.tableau
     assert isinstance(series, Series)
-    return [Decl("cap", "double", (), "inout"), coefficients(series, jet), arr("acc", "inout")]
+    fend = [arr("fend", "inout")] if events else []
+    return [Decl("cap", "double", (), "inout"), coefficients(series, jet), arr("acc", "inout"),
+            *fend]  # fmt: skip
 
 
 def functions(
