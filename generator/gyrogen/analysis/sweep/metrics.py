@@ -215,11 +215,12 @@ class _Watch:
         self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
 
     def _rates(self, x: np.ndarray) -> np.ndarray:
-        """(4, N) u1..u4 at the states x (N, nx), each row contiguous."""
+        """u1..u4 at the states x (..., nx), its axes reversed: (4, N) from
+        (N, nx), (4, m, n) from (n, m, nx); each row contiguous."""
         first = self.u[0]
         if self.u == list(range(first, first + 4)):
-            return np.ascontiguousarray(x[:, first : first + 4].T)  # one copy, no gather
-        return np.ascontiguousarray(x[:, self.u].T)
+            return np.ascontiguousarray(x[..., first : first + 4].T)  # one copy, no gather
+        return np.ascontiguousarray(x[..., self.u].T)
 
     def _momentum(self, u: np.ndarray, rows: np.ndarray) -> tuple[tuple[np.ndarray, ...], Any]:
         """H at the rates u (4, N) of rows over a power of two per row, and that power: 1
@@ -238,12 +239,16 @@ class _Watch:
         """The nutation angle, |omega| and |H| at the states x of rows (|H|
         inf where it is beyond doubles)."""
         u = self._rates(x)
+        nutation, norm = self._attitude(u, rows)
+        return nutation, _speed(u), norm
+
+    def _attitude(self, u: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nutation angle and |H| at the rates u (4, N) of rows."""
         h, scale = self._momentum(u, rows)
         transverse = np.hypot(h[0], h[2])
-        rate = np.hypot(np.hypot(u[0], u[1]), u[2])  # no square to overflow: |u| to 1e308
         with np.errstate(over="ignore"):
             norm = np.hypot(transverse, h[1]) * scale
-        return np.arctan2(transverse, h[1]), rate, norm
+        return np.arctan2(transverse, h[1]), norm
 
     def _quantity(self, q: str, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
         if q in ("nutation", "rate"):
@@ -255,27 +260,65 @@ class _Watch:
         did not reach: a failed run's metrics cover the samples it reached),
         all in one look; the first begun columns are the rows' starts (seen
         already: no crossing there)."""
-        n, m, nx = xs.shape
-        flat = xs.reshape(n * m, nx)  # a view where xs is a whole grid
-        at = np.repeat(rows, m)
-        nutation, rate, norm = (v.reshape(n, m) for v in self._look(flat, at))
+        n, m, _ = xs.shape
+        u = self._rates(xs).reshape(4, m * n)  # sample by sample: the reductions over m
+        nutation, norm = (v.reshape(m, n) for v in self._attitude(u, np.tile(rows, m)))
+        crossings = not self.located and bool(self.thresholds)
+        rate = _speed(u).reshape(m, n) if crossings and "rate" in self.thresholds else None
         every = np.fmax.reduce  # NaN (not reached) skipped; all NaN: NaN
-        self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=1))
-        self.rate[rows] = np.fmax(self.rate[rows], every(rate, axis=1))
-        h0 = self.h0[rows, None]
+        self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=0))
+        fastest = _fastest(u, m, n) if rate is None else every(rate, axis=0)
+        self.rate[rows] = np.fmax(self.rate[rows], fastest)
+        h0 = self.h0[rows]
         with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
             drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
-        self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=1))
-        if self.located or not self.thresholds:
+        self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=0))
+        if not crossings:
             return
         reached = ~np.isnan(xs[:, begun:, 0])
-        looked = {"nutation": nutation, "rate": rate}
+        looked = {"nutation": nutation.T} | ({} if rate is None else {"rate": rate.T})
         for q, thr in self.thresholds.items():
             value = looked[q] if q in looked else xs[:, :, self.states.index(q)]
             crossed = np.sign(value[:, begun:] - thr) != np.sign(self.start[q][rows, None])
             crossed &= reached
             first = crossed.any(axis=1) & np.isnan(self.time_to[q][rows])
             self.time_to[q][rows[first]] = times[begun:][np.argmax(crossed[first], axis=1)]
+
+
+def _speed(u: np.ndarray) -> np.ndarray:
+    """|omega| from the rates u (4, N): no square to overflow, |u| to 1e308."""
+    return np.hypot(np.hypot(u[0], u[1]), u[2])
+
+
+_MARGIN = 2.0**-40
+"""How far below its row's largest sum of squares u1^2 + u2^2 + u3^2 a
+sample's may be and still be a candidate for the largest |omega|: the sum's
+rounding (3 units of 2^-53) and hypot's (one ulp each) stay below 2^-48."""
+_FEW = 4
+"""Samples per row below which every one's |omega| is computed (the
+candidates' passes would cost more)."""
+_TINY, _HUGE = 2.0**-900, 2.0**900
+"""The sums of squares that keep their relative accuracy: a smaller one may
+have lost it to underflow (an absolute slack), a larger one could overflow."""
+
+
+def _fastest(u: np.ndarray, m: int, n: int) -> np.ndarray:
+    """Each row's largest |omega| (NaN where none was reached) over the rates
+    u (4, m n) of its m samples (sample by sample): _speed, bit for bit, at
+    the samples whose sum of squares is within _MARGIN of their row's
+    largest (the others' |omega| are smaller), not at every one (hypot costs
+    20 ns a value; the nutation and |H| need theirs at every sample). At
+    every sample where a sum could overflow, or a row has few samples."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        r2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).reshape(m, n)
+    if m < _FEW or not np.fmax.reduce(r2, axis=None) <= _HUGE:  # NaN: nothing reached
+        return np.fmax.reduce(_speed(u).reshape(m, n), axis=0)
+    top = np.fmax.reduce(r2, axis=0) * (1 - _MARGIN) - _TINY  # NaN: no sample reached
+    with np.errstate(invalid="ignore"):
+        pick = np.flatnonzero(r2 >= top)
+    rate = np.full(m * n, np.nan)
+    rate[pick] = _speed(u[:, pick])
+    return np.fmax.reduce(rate.reshape(m, n), axis=0)
 
 
 @dataclass
