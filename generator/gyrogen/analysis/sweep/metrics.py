@@ -196,7 +196,8 @@ class _Watch:
     """The sampled metrics of a chunk's trajectories, updated sample by
     sample; values: each parameter, a number or one per trajectory;
     located: the time_to thresholds are located as events (their columns
-    are the events' first times: see does not look for crossings)."""
+    are the events' first times: see does not look for crossings). The
+    metrics the sweep does not keep are not updated."""
 
     def __init__(self, spec: Spec, values: dict[str, Any], x0: np.ndarray,
                  located: bool = False) -> None:  # fmt: skip
@@ -205,6 +206,7 @@ class _Watch:
         self.lumped = lumped_inertias(*(values[n] for n in LUMPED_FROM))
         self.J = values["J"]
         self.thresholds = spec.sweep.metrics.time_to
+        self.kept = set(spec.sweep.metrics.keep)  # see computes no other
         self.located = located
         self.states = states
         every = np.arange(len(x0))
@@ -262,21 +264,28 @@ class _Watch:
         already: no crossing there)."""
         n, m, _ = xs.shape
         u = self._rates(xs).reshape(4, m * n)  # sample by sample: the reductions over m
-        nutation, norm = (v.reshape(m, n) for v in self._attitude(u, np.tile(rows, m)))
         crossings = not self.located and bool(self.thresholds)
-        rate = _speed(u).reshape(m, n) if crossings and "rate" in self.thresholds else None
         every = np.fmax.reduce  # NaN (not reached) skipped; all NaN: NaN
-        self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=0))
-        fastest = _fastest(u, m, n) if rate is None else every(rate, axis=0)
-        self.rate[rows] = np.fmax(self.rate[rows], fastest)
-        h0 = self.h0[rows]
-        with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
-            drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
-        self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=0))
+        looked = {}
+        if self.kept & {"max_nutation", "invariant_drift"} or (
+            crossings and "nutation" in self.thresholds
+        ):
+            nutation, norm = (v.reshape(m, n) for v in self._attitude(u, np.tile(rows, m)))
+            self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=0))
+            h0 = self.h0[rows]
+            with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
+                drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
+            self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=0))
+            looked["nutation"] = nutation.T
+        if crossings and "rate" in self.thresholds:
+            rate = _speed(u).reshape(m, n)
+            self.rate[rows] = np.fmax(self.rate[rows], every(rate, axis=0))
+            looked["rate"] = rate.T
+        elif "max_rate" in self.kept:
+            self.rate[rows] = np.fmax(self.rate[rows], _fastest(u, m, n))
         if not crossings:
             return
         reached = ~np.isnan(xs[:, begun:, 0])
-        looked = {"nutation": nutation.T} | ({} if rate is None else {"rate": rate.T})
         for q, thr in self.thresholds.items():
             value = looked[q] if q in looked else xs[:, :, self.states.index(q)]
             crossed = np.sign(value[:, begun:] - thr) != np.sign(self.start[q][rows, None])
@@ -475,12 +484,15 @@ def _with_events(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.
 def _tally(logs: EventLogs, kept: np.ndarray, rows: np.ndarray, first: dict[str, np.ndarray],
            count: dict[str, np.ndarray]) -> None:  # fmt: skip
     """Each event's first time and count in the logs kept, rows' (in order)."""
-    held = np.arange(logs.which.shape[1]) < logs.counts[kept, None]
+    counts, rows = logs.counts[kept], rows[kept]
+    width = max(1, int(np.max(counts, initial=0)))  # what the logs hold: a few of their capacity
+    which, times = logs.which[kept, :width], logs.times[kept, :width]
+    held = np.arange(width) < counts[:, None]
     for k, e in enumerate(logs.names):
-        hit = held & (logs.which[kept] == k)
-        count[e][rows[kept]] = hit.sum(axis=1)
+        hit = held & (which == k)
+        count[e][rows] = hit.sum(axis=1)
         seen = hit.any(axis=1)
-        first[e][rows[kept][seen]] = logs.times[kept][seen, np.argmax(hit[seen], axis=1)]
+        first[e][rows[seen]] = times[seen, np.argmax(hit[seen], axis=1)]
 
 
 def _restarted(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
