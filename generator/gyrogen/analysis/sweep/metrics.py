@@ -213,7 +213,9 @@ class _Watch:
         self.nutation, self.rate, self.h0 = self._look(x0, every)
         self.nutation_0 = self.nutation.copy()
         self.drift = np.zeros(len(x0))
-        self.start = {q: self._quantity(q, x0, every) - thr for q, thr in self.thresholds.items()}
+        looked = {"nutation": self.nutation, "rate": self.rate}  # at x0
+        self.start = {q: (looked[q] if q in looked else x0[:, states.index(q)]) - thr
+                      for q, thr in self.thresholds.items()}  # fmt: skip
         self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
 
     def _rates(self, x: np.ndarray) -> np.ndarray:
@@ -251,11 +253,6 @@ class _Watch:
         with np.errstate(over="ignore"):
             norm = np.hypot(transverse, h[1]) * scale
         return np.arctan2(transverse, h[1]), norm
-
-    def _quantity(self, q: str, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        if q in ("nutation", "rate"):
-            return self._look(x, rows)[0 if q == "nutation" else 1]
-        return x[:, self.states.index(q)]
 
     def see(self, times: np.ndarray, xs: np.ndarray, rows: np.ndarray, begun: int = 0) -> None:
         """The states xs[i, k] of row rows[i] at times[k] (NaN where its run
