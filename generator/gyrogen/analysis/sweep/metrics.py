@@ -219,12 +219,11 @@ class _Watch:
         self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
 
     def _rates(self, x: np.ndarray) -> np.ndarray:
-        """u1..u4 at the states x (..., nx), its axes reversed: (4, N) from
-        (N, nx), (4, m, n) from (n, m, nx); each row contiguous."""
+        """(4, N) u1..u4 at the states x (N, nx), each row contiguous."""
         first = self.u[0]
         if self.u == list(range(first, first + 4)):
-            return np.ascontiguousarray(x[..., first : first + 4].T)  # one copy, no gather
-        return np.ascontiguousarray(x[..., self.u].T)
+            return np.ascontiguousarray(x[:, first : first + 4].T)  # one copy, no gather
+        return np.ascontiguousarray(x[:, self.u].T)
 
     def _momentum(self, u: np.ndarray, rows: np.ndarray) -> tuple[tuple[np.ndarray, ...], Any]:
         """H at the rates u (4, N) of rows over a power of two per row, and that power: 1
@@ -259,27 +258,27 @@ class _Watch:
         did not reach: a failed run's metrics cover the samples it reached),
         all in one look; the first begun columns are the rows' starts (seen
         already: no crossing there)."""
-        n, m, _ = xs.shape
-        u = self._rates(xs).reshape(4, m * n)  # sample by sample: the reductions over m
+        n, m, nx = xs.shape
+        flat = xs.reshape(n * m, nx)  # a view where xs is a whole grid
+        u = self._rates(flat)  # row by row: hypot is fastest on neighbouring values
         crossings = not self.located and bool(self.thresholds)
-        every = np.fmax.reduce  # NaN (not reached) skipped; all NaN: NaN
         looked = {}
         if self.kept & {"max_nutation", "invariant_drift"} or (
             crossings and "nutation" in self.thresholds
         ):
-            nutation, norm = (v.reshape(m, n) for v in self._attitude(u, np.tile(rows, m)))
-            self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=0))
-            h0 = self.h0[rows]
+            nutation, norm = (v.reshape(n, m) for v in self._attitude(u, np.repeat(rows, m)))
+            self.nutation[rows] = np.fmax(self.nutation[rows], _largest(nutation))
+            h0 = self.h0[rows, None]
             with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
                 drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
-            self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=0))
-            looked["nutation"] = nutation.T
+            self.drift[rows] = np.fmax(self.drift[rows], _largest(drift))
+            looked["nutation"] = nutation
         if crossings and "rate" in self.thresholds:
-            rate = _speed(u).reshape(m, n)
-            self.rate[rows] = np.fmax(self.rate[rows], every(rate, axis=0))
-            looked["rate"] = rate.T
+            rate = _speed(u).reshape(n, m)
+            self.rate[rows] = np.fmax(self.rate[rows], _largest(rate))
+            looked["rate"] = rate
         elif "max_rate" in self.kept:
-            self.rate[rows] = np.fmax(self.rate[rows], _fastest(u, m, n))
+            self.rate[rows] = np.fmax(self.rate[rows], _fastest(u, n, m))
         if not crossings:
             return
         reached = ~np.isnan(xs[:, begun:, 0])
@@ -308,23 +307,30 @@ _TINY, _HUGE = 2.0**-900, 2.0**900
 have lost it to underflow (an absolute slack), a larger one could overflow."""
 
 
-def _fastest(u: np.ndarray, m: int, n: int) -> np.ndarray:
+def _largest(a: np.ndarray) -> np.ndarray:
+    """Each row's largest value of a (n, m), NaN skipped (all NaN: NaN):
+    over a transposed copy, whose reduction runs across the rows (one over
+    each row of a few samples costs 3 times the copy and it)."""
+    return np.fmax.reduce(np.ascontiguousarray(a.T), axis=0)
+
+
+def _fastest(u: np.ndarray, n: int, m: int) -> np.ndarray:
     """Each row's largest |omega| (NaN where none was reached) over the rates
-    u (4, m n) of its m samples (sample by sample): _speed, bit for bit, at
-    the samples whose sum of squares is within _MARGIN of their row's
-    largest (the others' |omega| are smaller), not at every one (hypot costs
-    20 ns a value; the nutation and |H| need theirs at every sample). At
-    every sample where a sum could overflow, or a row has few samples."""
+    u (4, n m) of its m samples: _speed, bit for bit, at the samples whose
+    sum of squares is within _MARGIN of their row's largest (the others'
+    |omega| are smaller), not at every one (hypot costs 10-15 ns a value;
+    the nutation and |H| need theirs at every sample). At every sample where
+    a sum could overflow, or a row has few samples."""
     with np.errstate(over="ignore", invalid="ignore"):
-        r2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).reshape(m, n)
+        r2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).reshape(n, m)
     if m < _FEW or not np.fmax.reduce(r2, axis=None) <= _HUGE:  # NaN: nothing reached
-        return np.fmax.reduce(_speed(u).reshape(m, n), axis=0)
-    top = np.fmax.reduce(r2, axis=0) * (1 - _MARGIN) - _TINY  # NaN: no sample reached
+        return _largest(_speed(u).reshape(n, m))
+    top = _largest(r2) * (1 - _MARGIN) - _TINY  # NaN: no sample reached
     with np.errstate(invalid="ignore"):
-        pick = np.flatnonzero(r2 >= top)
-    rate = np.full(m * n, np.nan)
+        pick = np.flatnonzero(r2 >= top[:, None])
+    rate = np.full(n * m, np.nan)
     rate[pick] = _speed(u[:, pick])
-    return np.fmax.reduce(rate.reshape(m, n), axis=0)
+    return _largest(rate.reshape(n, m))
 
 
 @dataclass
