@@ -302,9 +302,10 @@ rounding (3 units of 2^-53) and hypot's (one ulp each) stay below 2^-48."""
 _FEW = 4
 """Samples per row below which every one's |omega| is computed (the
 candidates' passes would cost more)."""
-_TINY, _HUGE = 2.0**-900, 2.0**900
-"""The sums of squares that keep their relative accuracy: a smaller one may
-have lost it to underflow (an absolute slack), a larger one could overflow."""
+_TINY, _HUGE = 2.0**-900, 2.0**450
+"""A sum of squares below _TINY may have lost its relative accuracy to
+underflow (the candidates' absolute slack); rates within _HUGE cannot
+overflow it."""
 
 
 def _largest(a: np.ndarray) -> np.ndarray:
@@ -320,11 +321,14 @@ def _fastest(u: np.ndarray, n: int, m: int) -> np.ndarray:
     sum of squares is within _MARGIN of their row's largest (the others'
     |omega| are smaller), not at every one (hypot costs 10-15 ns a value;
     the nutation and |H| need theirs at every sample). At every sample where
-    a sum could overflow, or a row has few samples."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        r2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).reshape(n, m)
-    if m < _FEW or not np.fmax.reduce(r2, axis=None) <= _HUGE:  # NaN: nothing reached
-        return _largest(_speed(u).reshape(n, m))
+    a sum could overflow (or a rate is infinite), or a row has few samples."""
+    w = u[:3]  # an infinite rate where another is NaN is a sample whose sum of squares is NaN
+    if (
+        m < _FEW
+        or not -_HUGE <= np.fmin.reduce(w, axis=None) <= np.fmax.reduce(w, axis=None) <= _HUGE
+    ):
+        return _largest(_speed(u).reshape(n, m))  # NaN: nothing reached
+    r2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).reshape(n, m)
     top = _largest(r2) * (1 - _MARGIN) - _TINY  # NaN: no sample reached
     with np.errstate(invalid="ignore"):
         pick = np.flatnonzero(r2 >= top[:, None])
