@@ -118,9 +118,19 @@ def variational(
     entries = [(i, k) for k, src in enumerate(sources) for i in sorted(reached(src, rows))]
     symbols = {e: sm.Symbol(f"phi_{e[0]}_{e[1]}", real=True) for e in entries}
     derivatives = []
+    done: dict[tuple[int, int], sm.Expr] = {}
+    chains = _chains(jac, rows, n)
     for i, k in entries:
-        terms = [jac[i * n + j] * symbols[(j, k)] for j in sorted(rows[i]) if (j, k) in symbols]
-        derivatives.append(sm.Add(*terms, jp[k][i]))
+        if i in chains:
+            l, r, rest = chains[i]
+            terms = [rest[j] * symbols[(j, k)] for j in sorted(rest) if (j, k) in symbols]
+            base = done.get((l, k), sm.S.Zero) - jp[k][l]
+            expr = sm.Add(r * base, *terms, jp[k][i])
+        else:
+            terms = [jac[i * n + j] * symbols[(j, k)] for j in sorted(rows[i]) if (j, k) in symbols]
+            expr = sm.Add(*terms, jp[k][i])
+        done[(i, k)] = expr
+        derivatives.append(expr)
     n_state = n if WRT_STATE in wrt else 0
     return Variational(
         tuple(columns), tuple(entries), tuple(symbols.values()), tuple(derivatives), error, n_state
@@ -146,3 +156,48 @@ def _parameter_column(
             slopes[c] = hoister.symbol_for(slope, simplify=False)
     d = Derivatives()
     return [sm.Add(*(d.of(e, c) * s for c, s in slopes.items())) for e in f]
+
+
+CHAIN_OPS = 40
+"""The largest entry of J (sympy's count_ops) _chains compares: their
+ratios and differences are cancelled, which takes minutes on a cluster's
+entries of hundreds of operations."""
+Chain = tuple[int, sm.Expr, dict[int, sm.Expr]]
+"""An earlier row l, a factor r and the rest: J's row i is r J's row l plus
+the rest (by column)."""
+
+
+def _chains(jac: list[sm.Expr], rows: list[set[int]], n: int) -> dict[int, Chain]:
+    """The rows of J (n x n, its pattern rows) that are a multiple of an
+    earlier one plus fewer terms than they hold (a chain rule the
+    derivatives wrote out: q3' = u2 - sin(q2) q1' gives J's row of q3 as
+    -sin(q2) times q1's plus two terms, where it held five): each entry
+    (i, k) of Phi' is then r times (l, k)'s plus the rest, one product
+    where there were several. The factor is a ratio of two entries with no
+    denominator (the rewritten row divides by nothing the old one did not)
+    and row l reads no state row i does not (Phi' reads the entries it read);
+    each row's best (the fewest terms left), on rows not rewritten; rows
+    whose entries are small (CHAIN_OPS) alone."""
+    out: dict[int, Chain] = {}
+    small = [i for i in range(n) if all(sm.count_ops(jac[i * n + j]) <= CHAIN_OPS for j in rows[i])]
+    for i in small:
+        own = sorted(rows[i])
+        best: Chain | None = None
+        for l in (l for l in small if l < i):
+            common = [j for j in own if j in rows[l]]
+            if l in out or len(common) < 2 or not rows[l] <= rows[i]:
+                continue
+            by_ratio: dict[sm.Expr, int] = {}
+            for j in common:
+                r = sm.cancel(jac[i * n + j] / jac[l * n + j])
+                by_ratio[r] = by_ratio.get(r, 0) + 1
+            r, count = max(by_ratio.items(), key=lambda item: item[1])
+            if count < 2 or sm.fraction(r)[1] != 1:
+                continue
+            rest = {j: e for j in own
+                    if (e := sm.cancel(jac[i * n + j] - r * jac[l * n + j])) != 0}  # fmt: skip
+            if 1 + len(rest) < len(own) and (best is None or len(rest) < len(best[2])):
+                best = (l, r, rest)
+        if best is not None:
+            out[i] = best
+    return out

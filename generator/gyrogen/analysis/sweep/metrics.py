@@ -196,7 +196,8 @@ class _Watch:
     """The sampled metrics of a chunk's trajectories, updated sample by
     sample; values: each parameter, a number or one per trajectory;
     located: the time_to thresholds are located as events (their columns
-    are the events' first times: see does not look for crossings)."""
+    are the events' first times: see does not look for crossings). The
+    metrics the sweep does not keep are not updated."""
 
     def __init__(self, spec: Spec, values: dict[str, Any], x0: np.ndarray,
                  located: bool = False) -> None:  # fmt: skip
@@ -205,13 +206,16 @@ class _Watch:
         self.lumped = lumped_inertias(*(values[n] for n in LUMPED_FROM))
         self.J = values["J"]
         self.thresholds = spec.sweep.metrics.time_to
+        self.kept = set(spec.sweep.metrics.keep)  # see computes no other
         self.located = located
         self.states = states
         every = np.arange(len(x0))
         self.nutation, self.rate, self.h0 = self._look(x0, every)
         self.nutation_0 = self.nutation.copy()
         self.drift = np.zeros(len(x0))
-        self.start = {q: self._quantity(q, x0, every) - thr for q, thr in self.thresholds.items()}
+        looked = {"nutation": self.nutation, "rate": self.rate}  # at x0
+        self.start = {q: (looked[q] if q in looked else x0[:, states.index(q)]) - thr
+                      for q, thr in self.thresholds.items()}  # fmt: skip
         self.time_to = {q: np.where(d == 0, 0.0, np.nan) for q, d in self.start.items()}
 
     def _rates(self, x: np.ndarray) -> np.ndarray:
@@ -238,17 +242,16 @@ class _Watch:
         """The nutation angle, |omega| and |H| at the states x of rows (|H|
         inf where it is beyond doubles)."""
         u = self._rates(x)
+        nutation, norm = self._attitude(u, rows)
+        return nutation, _speed(u), norm
+
+    def _attitude(self, u: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The nutation angle and |H| at the rates u (4, N) of rows."""
         h, scale = self._momentum(u, rows)
         transverse = np.hypot(h[0], h[2])
-        rate = np.hypot(np.hypot(u[0], u[1]), u[2])  # no square to overflow: |u| to 1e308
         with np.errstate(over="ignore"):
             norm = np.hypot(transverse, h[1]) * scale
-        return np.arctan2(transverse, h[1]), rate, norm
-
-    def _quantity(self, q: str, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        if q in ("nutation", "rate"):
-            return self._look(x, rows)[0 if q == "nutation" else 1]
-        return x[:, self.states.index(q)]
+        return np.arctan2(transverse, h[1]), norm
 
     def see(self, times: np.ndarray, xs: np.ndarray, rows: np.ndarray, begun: int = 0) -> None:
         """The states xs[i, k] of row rows[i] at times[k] (NaN where its run
@@ -257,25 +260,81 @@ class _Watch:
         already: no crossing there)."""
         n, m, nx = xs.shape
         flat = xs.reshape(n * m, nx)  # a view where xs is a whole grid
-        at = np.repeat(rows, m)
-        nutation, rate, norm = (v.reshape(n, m) for v in self._look(flat, at))
-        every = np.fmax.reduce  # NaN (not reached) skipped; all NaN: NaN
-        self.nutation[rows] = np.fmax(self.nutation[rows], every(nutation, axis=1))
-        self.rate[rows] = np.fmax(self.rate[rows], every(rate, axis=1))
-        h0 = self.h0[rows, None]
-        with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
-            drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
-        self.drift[rows] = np.fmax(self.drift[rows], every(drift, axis=1))
-        if self.located or not self.thresholds:
+        u = self._rates(flat)  # row by row: hypot is fastest on neighbouring values
+        crossings = not self.located and bool(self.thresholds)
+        looked = {}
+        if self.kept & {"max_nutation", "invariant_drift"} or (
+            crossings and "nutation" in self.thresholds
+        ):
+            nutation, norm = (v.reshape(n, m) for v in self._attitude(u, np.repeat(rows, m)))
+            self.nutation[rows] = np.fmax(self.nutation[rows], _largest(nutation))
+            h0 = self.h0[rows, None]
+            with np.errstate(invalid="ignore"):  # |H| beyond doubles: no drift (nan: fmax skips)
+                drift = np.abs(norm - h0) / np.where(h0 == 0, 1.0, h0)
+            self.drift[rows] = np.fmax(self.drift[rows], _largest(drift))
+            looked["nutation"] = nutation
+        if crossings and "rate" in self.thresholds:
+            rate = _speed(u).reshape(n, m)
+            self.rate[rows] = np.fmax(self.rate[rows], _largest(rate))
+            looked["rate"] = rate
+        elif "max_rate" in self.kept:
+            self.rate[rows] = np.fmax(self.rate[rows], _fastest(u, n, m))
+        if not crossings:
             return
         reached = ~np.isnan(xs[:, begun:, 0])
-        looked = {"nutation": nutation, "rate": rate}
         for q, thr in self.thresholds.items():
             value = looked[q] if q in looked else xs[:, :, self.states.index(q)]
             crossed = np.sign(value[:, begun:] - thr) != np.sign(self.start[q][rows, None])
             crossed &= reached
             first = crossed.any(axis=1) & np.isnan(self.time_to[q][rows])
             self.time_to[q][rows[first]] = times[begun:][np.argmax(crossed[first], axis=1)]
+
+
+def _speed(u: np.ndarray) -> np.ndarray:
+    """|omega| from the rates u (4, N): no square to overflow, |u| to 1e308."""
+    return np.hypot(np.hypot(u[0], u[1]), u[2])
+
+
+_MARGIN = 2.0**-40
+"""How far below its row's largest sum of squares u1^2 + u2^2 + u3^2 a
+sample's may be and still be a candidate for the largest |omega|: the sum's
+rounding (3 units of 2^-53) and hypot's (one ulp each) stay below 2^-48."""
+_FEW = 4
+"""Samples per row below which every one's |omega| is computed (the
+candidates' passes would cost more)."""
+_TINY, _HUGE = 2.0**-900, 2.0**450
+"""A sum of squares below _TINY may have lost its relative accuracy to
+underflow (the candidates' absolute slack); rates within _HUGE cannot
+overflow it."""
+
+
+def _largest(a: np.ndarray) -> np.ndarray:
+    """Each row's largest value of a (n, m), NaN skipped (all NaN: NaN):
+    over a transposed copy, whose reduction runs across the rows (one over
+    each row of a few samples costs 3 times the copy and it)."""
+    return np.fmax.reduce(np.ascontiguousarray(a.T), axis=0)
+
+
+def _fastest(u: np.ndarray, n: int, m: int) -> np.ndarray:
+    """Each row's largest |omega| (NaN where none was reached) over the rates
+    u (4, n m) of its m samples: _speed, bit for bit, at the samples whose
+    sum of squares is within _MARGIN of their row's largest (the others'
+    |omega| are smaller), not at every one (hypot costs 10-15 ns a value;
+    the nutation and |H| need theirs at every sample). At every sample where
+    a sum could overflow (or a rate is infinite), or a row has few samples."""
+    w = u[:3]  # an infinite rate where another is NaN is a sample whose sum of squares is NaN
+    if (
+        m < _FEW
+        or not -_HUGE <= np.fmin.reduce(w, axis=None) <= np.fmax.reduce(w, axis=None) <= _HUGE
+    ):
+        return _largest(_speed(u).reshape(n, m))  # NaN: nothing reached
+    r2 = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).reshape(n, m)
+    top = _largest(r2) * (1 - _MARGIN) - _TINY  # NaN: no sample reached
+    with np.errstate(invalid="ignore"):
+        pick = np.flatnonzero(r2 >= top[:, None])
+    rate = np.full(n * m, np.nan)
+    rate[pick] = _speed(u[:, pick])
+    return _largest(rate.reshape(n, m))
 
 
 @dataclass
@@ -432,12 +491,15 @@ def _with_events(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.
 def _tally(logs: EventLogs, kept: np.ndarray, rows: np.ndarray, first: dict[str, np.ndarray],
            count: dict[str, np.ndarray]) -> None:  # fmt: skip
     """Each event's first time and count in the logs kept, rows' (in order)."""
-    held = np.arange(logs.which.shape[1]) < logs.counts[kept, None]
+    counts, rows = logs.counts[kept], rows[kept]
+    width = max(1, int(np.max(counts, initial=0)))  # what the logs hold: a few of their capacity
+    which, times = logs.which[kept, :width], logs.times[kept, :width]
+    held = np.arange(width) < counts[:, None]
     for k, e in enumerate(logs.names):
-        hit = held & (logs.which[kept] == k)
-        count[e][rows[kept]] = hit.sum(axis=1)
+        hit = held & (which == k)
+        count[e][rows] = hit.sum(axis=1)
         seen = hit.any(axis=1)
-        first[e][rows[kept][seen]] = logs.times[kept][seen, np.argmax(hit[seen], axis=1)]
+        first[e][rows[seen]] = times[seen, np.argmax(hit[seen], axis=1)]
 
 
 def _restarted(comp: Compiled, spec: Spec, batches: list[tuple[np.ndarray, np.ndarray]],
