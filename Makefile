@@ -197,6 +197,8 @@ FUZZ_AGREE ?= 250
 FUZZ_TOLERANCE ?= 300
 FUZZ_EVENTS ?= 20
 FUZZ_VAR ?= 12
+fuzz: export GYROGEN_WIDE = 1
+fuzz: export GYROGEN_OPT_LEVEL ?= 2
 fuzz: setup
 	GYROGEN_EVENT_DRAWS=$(FUZZ_EVENTS) GYROGEN_EVENT_SEED=$$(od -An -N4 -tu4 /dev/urandom) \
 	  $(BIN)/python -m pytest -q -n auto tests/test_events_drawn.py
