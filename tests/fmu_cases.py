@@ -23,10 +23,10 @@ import numpy as np
 from gyrogen.analysis.check.cases import quaternion_scene
 from gyrogen.analysis.simulate import engine
 from gyrogen.analysis.simulate.result import Settings
-from gyrogen.codegen.fmu_model import FmuModel, Stepping
-from gyrogen.codegen.generate import unit_of
+from gyrogen.codegen.fmu_model import FmuModel, Rendered, Stepping
 from gyrogen.files import write_atomic
 from gyrogen.runtime import fmu_build
+from gyrogen.runtime.scene_build import scene_sources
 from gyrogen.scene import Scene, default, load
 
 BAR = 1e-8
@@ -64,7 +64,8 @@ def build_model(scene: Scene, method: str, out: Path) -> Path:
     M` writes) in out."""
     sim = scene.simulate
     stepping = Stepping(method, sim.rtol, sim.atol, sim.t_end, sim.dt)
-    model = FmuModel(unit_of(scene), tuple(engine.runtime_values(scene)), stepping)
+    rendered = Rendered(scene, scene_sources(scene).files)
+    model = FmuModel(rendered, tuple(engine.runtime_values(scene)), stepping)
     write_atomic(out, fmu_build.build(model, out))
     return out / f"{scene.name}.fmu"
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -743,3 +744,32 @@ def test_verify_after_generate_derives_nothing_again(
     assert written == {p.name: p.read_bytes() for p in gen.iterdir() if p.name in written}
     lib = {"CMakeLists.txt", "torque_free.mk", "torque_freeConfig.cmake.in", "torque_free.pc.in"}
     assert {p.name for p in gen.iterdir()} - set(written) == lib
+
+
+def test_other_scenes_take_the_full_model_from_the_cache(
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A scene other than the default one is rendered (by `gyrogen generate`
+    and by scene_sources, api.compile's path) with the full model's sizes
+    read from the default scene's kept manifest: the full model is not
+    derived, and its sizes are those a derivation gives."""
+    from gyrogen.codegen.manifest import FULL_MODEL, sizes
+    from gyrogen.runtime import scene_build
+    from gyrogen.scene import load
+
+    derived = sizes(generate_module.full_model_unit())  # once per process (source_dir's too)
+    held = scene_build.scene_sources(default())  # the run's cache: seeded from generated/
+    monkeypatch.setenv("GYROGEN_CACHE", str(tmp_path / "cache"))
+    scene_build.keep_sources(default(), held.build_id, held.files)
+    monkeypatch.setattr(generate_module, "full_model_unit", lambda: pytest.fail("full model"))
+    code, text, err = cli(["generate", "torque_free", "--no-check", "--out", str(tmp_path / "o")])
+    assert code == 0, text + err
+    ops = derived["ops"]
+    assert text.splitlines()[-2].split() == [
+        "(full", "model)", "14/14", str(derived["np"]), str(derived["nc"]),
+        str(ops["setup"]), str(ops["rhs"]),
+    ]  # fmt: skip
+    rendered = scene_build.scene_sources(load("dual_spin")).files  # not kept: rendered
+    for manifest in (tmp_path / "o" / "manifest.json").read_text(), rendered["manifest.json"]:
+        full = json.loads(manifest)["full_model"]
+        assert full == {key: derived[key] for key in FULL_MODEL}

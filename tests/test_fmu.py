@@ -30,7 +30,7 @@ from wide import WIDE
 from gyrogen import abi, api, methods
 from gyrogen.runtime.flags import C_STRICT, C_WARNINGS
 from gyrogen.runtime.fmu_build import fmi_headers
-from gyrogen.scene import builtin_text, parse
+from gyrogen.scene import builtin_text, load, parse
 
 pytestmark = pytest.mark.slow  # FMUs built and simulated with FMPy
 
@@ -584,8 +584,18 @@ def test_a_time_that_is_not_finite_is_refused(
     model.freeInstance()
 
 
-def test_co_simulation_steps_a_stiff_scene_implicitly(tmp_path: Path, cli) -> None:
-    """As `simulate --method auto`: radau5 for stiff_wheel (was dop853)."""
+def test_co_simulation_steps_a_stiff_scene_implicitly(
+    tmp_path: Path, cli, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """As `simulate --method auto`: radau5 for stiff_wheel (was dop853). Its
+    sources kept in the build cache, the FMU is made from them: the scene
+    is not derived."""
+    from gyrogen.codegen import generate
+    from gyrogen.runtime.scene_build import scene_sources
+
+    scene_sources(load("stiff_wheel"))  # kept (the run's cache is seeded from generated/)
+    monkeypatch.setattr(generate, "_UNITS", {})  # this process's units: gone
+    monkeypatch.setattr(generate, "make_context", lambda scene: pytest.fail("derived"))
     code, out, err = cli(["fmu", "stiff_wheel", "--out", str(tmp_path)])
     assert code == 0, err
     assert "Co-Simulation (radau5)" in out

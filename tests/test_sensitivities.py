@@ -22,7 +22,7 @@ from wide import WIDE
 
 from gyrogen.codegen.context import make_context
 from gyrogen.codegen.generate import unit_of
-from gyrogen.codegen.manifest import manifest
+from gyrogen.codegen.manifest import manifest, sizes
 from gyrogen.errors import SceneError, SetupRefused
 from gyrogen.runtime import build
 from gyrogen.runtime.compiled import Compiled
@@ -94,7 +94,7 @@ def test_layout_state_first_sparse_and_counted(derived):
     assert (u1, q1) not in entries  # the rates never read the attitude
     assert (q1, u1) in entries and (u1, u1) in entries
     assert len(entries) < 14 * 16 // 2
-    data = manifest(unit, unit)
+    data = manifest(unit, sizes(unit))
     assert data["variational"]["columns"] == [*names, "T", "l1"]
     assert data["variational"]["nx"] == 14 + len(entries)
     assert data["ops"]["var_rhs"] == unit.optimized.augmented.ops > data["ops"]["rhs"]

@@ -119,6 +119,13 @@ CLUSTER_OUTPUT_DOC: dict[str, tuple[str, str]] = {
 """The output functions of a rotor cluster."""
 
 
+def output_doc(cluster: bool) -> dict[str, tuple[str, str]]:
+    """The output functions' units and docs, in the order every model gives
+    them (out[] laid end to end): a rotor cluster's (the scene's [[rotors]])
+    or the paper's one rotor's."""
+    return CLUSTER_OUTPUT_DOC if cluster else OUTPUT_DOC
+
+
 @dataclass(frozen=True)
 class Code:
     """A return code: its value, the macro suffix (<PREFIX>_<name>), the one

@@ -12,12 +12,7 @@ from importlib.metadata import version
 import sympy as sm
 
 import gyrogen
-from gyrogen.abi import (
-    CLUSTER_OUTPUT_DOC,
-    OUTPUT_DOC,
-    Code,
-    setup_codes_of,
-)
+from gyrogen.abi import Code, output_doc, setup_codes_of
 from gyrogen.abi_groups import StateKind, state_kind
 from gyrogen.abi_rotors import AXIS, GIMBAL_AXIS, GIMBAL_KEYS, POSITION, rotor_name
 from gyrogen.codegen.integrators.driver import EV_SUBINTERVALS, Event, Grid
@@ -198,7 +193,7 @@ class SceneContext:
 
     @property
     def outputs(self) -> list[Output]:
-        doc = CLUSTER_OUTPUT_DOC if self.cluster else OUTPUT_DOC
+        doc = output_doc(self.cluster)
         return [Output(n, b, *doc[n]) for n, b in self.optimized.outputs.items()]
 
     @property
@@ -236,14 +231,13 @@ class SceneContext:
         """The events as the integrators' _events twins take them, or None."""
         if not self.scene.events or self.events is None:
             return None
-        way = {"up": 1, "down": -1, "any": 0}
         timed = {TIME, *self.equations.inputs}  # the time, or a table of it
         moving = any(e.free_symbols & timed for e in self.equations.events)
         pieces = EV_SUBINTERVALS if moving else 1
         read = self.optimized.events.free_symbols if self.optimized.events else set()
         reads = tuple(i for i, s in enumerate(self.states) if s in read)
         return Grid(
-            tuple(Event(way[e.direction], e.terminal) for e in self.scene.events),
+            tuple(Event(e.sign, e.terminal) for e in self.scene.events),
             pieces,
             reads if len(reads) < len(self.states) else (),
         )

@@ -5,8 +5,6 @@ binary is compiled from these (runtime/fmu_build.py)."""
 from __future__ import annotations
 
 from gyrogen import methods
-from gyrogen.codegen.backends import c
-from gyrogen.codegen.context import versions
 from gyrogen.codegen.fmu_model import FmuModel
 from gyrogen.codegen.render import render
 from gyrogen.errors import SceneError
@@ -35,13 +33,13 @@ def default_method(scene: Scene) -> str:
 def files(model: FmuModel) -> dict[str, str]:
     """Path inside the FMU -> text."""
     p = model.prefix
-    sources = {f"sources/{name}": text for name, text in c.files(model.unit).items()}
+    sources = {f"sources/{name}": text for name, text in model.unit.c_sources.items()}
     wrapper = f"{p}_fmi2.c"
     c_sources = sorted(name[len("sources/") :] for name in sources if name.endswith(".c"))
     ctx = {
         "model": model,
         "guid": model.guid(FMI_VERSION),
-        "versions": versions(),
+        "versions": model.unit.versions,
         "c_sources": [*c_sources, wrapper],
         "unit": model.unit,
     }

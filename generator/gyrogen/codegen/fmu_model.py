@@ -6,13 +6,16 @@ Co-Simulation steps (the method and its tolerances)."""
 from __future__ import annotations
 
 import hashlib
+import json
 import uuid
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 from gyrogen import abi, methods
-from gyrogen.codegen.context import SceneContext
 from gyrogen.codegen.units import DIMENSIONLESS, base_units, per_second
+from gyrogen.scene import Scene
 
 
 @dataclass(frozen=True)
@@ -61,8 +64,95 @@ class Stepping:
 
 
 @dataclass(frozen=True)
+class Row:
+    """A state, parameter or output function as the FMU names it (size: an
+    output's values; 1 for a state or parameter)."""
+
+    index: int
+    name: str
+    unit: str
+    doc: str
+    size: int = 1
+
+
+@dataclass(frozen=True, eq=False)
+class Rendered:
+    """What an FMU reads of a scene's rendering: the files render_all writes
+    (the manifest and the C sources; the build cache keeps them, so an FMU
+    of a scene rendered before derives nothing: runtime/scene_build.py's
+    scene_sources), with the scene."""
+
+    scene: Scene
+    files: Mapping[str, str]
+
+    @cached_property
+    def manifest(self) -> dict[str, Any]:
+        held: dict[str, Any] = json.loads(self.files["manifest.json"])
+        return held
+
+    @property
+    def prefix(self) -> str:
+        return str(self.manifest["prefix"])
+
+    @property
+    def macro(self) -> str:
+        return self.prefix.upper()
+
+    @property
+    def nx(self) -> int:
+        return int(self.manifest["nx"])
+
+    @property
+    def np(self) -> int:
+        return int(self.manifest["np"])
+
+    @property
+    def build_id(self) -> str:
+        return str(self.manifest["build_id"])
+
+    @property
+    def ops(self) -> dict[str, int]:
+        return dict(self.manifest["ops"])
+
+    @property
+    def versions(self) -> dict[str, str]:
+        return dict(self.manifest["versions"])
+
+    @property
+    def quaternion(self) -> bool:
+        """The attitude is Euler parameters, x[0..3]."""
+        return self.scene.attitude == "quaternion"
+
+    @property
+    def c_sources(self) -> dict[str, str]:
+        """The scene's C files (the manifest's files c_*), by name."""
+        names = [name for key, name in self.manifest["files"].items() if key.startswith("c_")]
+        return {name: self.files[name] for name in sorted(names)}
+
+    def _rows(self, key: str) -> list[Row]:
+        return [Row(i, n, *self.scene.unit_and_doc(n)) for i, n in enumerate(self.manifest[key])]
+
+    @property
+    def state_rows(self) -> list[Row]:
+        return self._rows("states")
+
+    @property
+    def param_rows(self) -> list[Row]:
+        return self._rows("parameters")
+
+    @property
+    def outputs(self) -> list[Row]:
+        """The output functions in out[]'s order (abi.output_doc's)."""
+        sizes = self.manifest["outputs"]
+        doc = abi.output_doc(bool(self.scene.rotors))
+        named = [n for n in doc if n in sizes]
+        return [Row(i, n, *doc[n], sizes[n]) for i, n in enumerate(named)]
+
+
+@dataclass(frozen=True)
 class FmuModel:
-    unit: SceneContext
+    unit: Rendered
+    """The scene's rendering, as the templates read it (model.unit)."""
     parameters: tuple[float, ...]
     """Start values of the runtime parameters, in p[] order."""
     stepping: Stepping
@@ -93,13 +183,11 @@ class FmuModel:
     @property
     def event_directions(self) -> list[int]:
         """Each event's crossings as the integrators take them (1 up, -1 down, 0 any)."""
-        grid = self.unit.event_grid
-        return [] if grid is None else [e.direction for e in grid.events]
+        return [e.sign for e in self.unit.scene.events]
 
     @property
     def event_terminal(self) -> list[int]:
-        grid = self.unit.event_grid
-        return [] if grid is None else [int(e.terminal) for e in grid.events]
+        return [int(e.terminal) for e in self.unit.scene.events]
 
     @property
     def located(self) -> bool:

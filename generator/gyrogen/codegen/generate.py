@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from functools import cache
 from pathlib import Path
+from typing import Any
 
 from gyrogen.codegen import buildfiles
 from gyrogen.codegen.backends import c, fortran
 from gyrogen.codegen.context import SceneContext, make_context
-from gyrogen.codegen.manifest import manifest
+from gyrogen.codegen.manifest import manifest, sizes
 from gyrogen.files import claim, write_atomic
 from gyrogen.scene import Scene
 from gyrogen.scene import default as default_scene
@@ -22,8 +24,13 @@ def full_model_unit() -> SceneContext:
     return make_context(default_scene())
 
 
-def render_all(unit: SceneContext, lib: bool = False) -> dict[str, str]:
-    """Every file of the scene; with lib, also CMakeLists.txt and <prefix>.mk."""
+def render_all(
+    unit: SceneContext, lib: bool = False, full: Mapping[str, Any] | None = None
+) -> dict[str, str]:
+    """Every file of the scene; with lib, also CMakeLists.txt and <prefix>.mk.
+    full: the full model's sizes, which the manifest compares with (what
+    manifest.sizes gives of it, or its manifest); derived when not given
+    (runtime/scene_build.py's full_model_manifest reads them from the cache)."""
     files: dict[str, str] = {}
     var = unit.variational
     for u in (unit, *([var] if var is not None else [])):
@@ -31,7 +38,7 @@ def render_all(unit: SceneContext, lib: bool = False) -> dict[str, str]:
             files.update(c.files(u))
         if "fortran" in unit.scene.targets:
             files.update(fortran.files(u))
-    data = manifest(unit, full_model_unit())
+    data = manifest(unit, sizes(full_model_unit()) if full is None else full)
     files["manifest.json"] = json.dumps(data, indent=2, sort_keys=True) + "\n"
     if lib:
         files.update(buildfiles.files(data))

@@ -5,17 +5,26 @@ an FFI (ctypes, say) can be driven from it alone."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from gyrogen.abi import ODE_CODES, STATS_FIELDS, Code
 from gyrogen.codegen.context import SceneContext, VariationalContext
 from gyrogen.methods import signature_of
 
+FULL_MODEL = ("nx", "np", "ops")
+"""What a manifest's full_model entry gives of the full model's sizes."""
 
-def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
-    """What tools and tests read instead of parsing C; full, the paper's full
-    model, is what the scene is compared with (its caller derives it)."""
+
+def sizes(unit: SceneContext) -> dict[str, Any]:
+    """A unit's sizes and op counts, as its manifest gives them."""
+    return {"nx": unit.nx, "np": unit.np, "nc": unit.nc, "ops": unit.ops}
+
+
+def manifest(unit: SceneContext, full: Mapping[str, Any]) -> dict[str, Any]:
+    """What tools and tests read instead of parsing C; full, the sizes of the
+    paper's full model (sizes of its unit, or its manifest, which holds
+    them), is what the scene is compared with."""
     p = unit.prefix
     ode = bool(unit.scene.integrators)
     return {
@@ -26,9 +35,7 @@ def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
         "states": [s.name for s in unit.states],
         "parameters": [s.name for s in unit.params],
         "folded": unit.scene.folded(),
-        "nx": unit.nx,
-        "np": unit.np,
-        "nc": unit.nc,
+        **sizes(unit),
         "outputs": {o.name: o.size for o in unit.outputs},
         "events": [e.model_dump(mode="json") for e in unit.scene.events],
         **({"linear": linear(unit)} if unit.optimized.linear is not None else {}),
@@ -44,15 +51,14 @@ def manifest(unit: SceneContext, full: SceneContext) -> dict[str, Any]:
         else {},
         "setup_codes": _codes(unit.setup_codes),
         "ode_codes": _codes(ODE_CODES) if ode else {},
-        "ops": unit.ops,
-        "full_model": {"nx": full.nx, "np": full.np, "ops": full.ops},
+        "full_model": {key: full[key] for key in FULL_MODEL},
         "files": _files(unit),
         "versions": unit.versions,
         **({"variational": variational(unit.variational, full)} if unit.variational else {}),
     }
 
 
-def variational(var: VariationalContext, full: SceneContext) -> dict[str, Any]:
+def variational(var: VariationalContext, full: Mapping[str, Any]) -> dict[str, Any]:
     """The augmented system's unit (<prefix>_var: y = x, then Phi's entries
     that can be nonzero), its layout: Phi's columns (the states' names when
     wrt has "state", then the parameters'), entries[r] = [row, column] of

@@ -33,10 +33,10 @@ def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
     headers come from FMPy, which must be installed."""
     from gyrogen.analysis.simulate.engine import runtime_values
     from gyrogen.codegen.fmu import default_method
-    from gyrogen.codegen.fmu_model import FmuModel, Stepping
-    from gyrogen.codegen.generate import unit_of
+    from gyrogen.codegen.fmu_model import FmuModel, Rendered, Stepping
     from gyrogen.files import can_write, write_atomic
     from gyrogen.runtime import fmu_build
+    from gyrogen.runtime.scene_build import scene_sources
 
     target = out or Path(".")
     fmu_build.fmi_headers()  # refusals first, before the seconds of deriving and compiling
@@ -51,7 +51,8 @@ def fmu(scene: Scene, out: Path | None, method: str | None) -> None:
     if method is None:
         chosen = _by_stiffness(scene, chosen)
     stepping = Stepping(method or chosen, sim.rtol, sim.atol, sim.t_end, sim.dt)
-    model = FmuModel(unit_of(scene), tuple(runtime_values(scene)), stepping)
+    rendered = Rendered(scene, scene_sources(scene).files)  # kept: derives nothing
+    model = FmuModel(rendered, tuple(runtime_values(scene)), stepping)
     write_atomic(target, fmu_build.build(model, target))
     click.echo(
         f"wrote {target / (scene.name + '.fmu')}: FMI 2.0, Model Exchange and Co-Simulation "

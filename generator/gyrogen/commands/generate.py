@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -14,24 +15,24 @@ if TYPE_CHECKING:
     from gyrogen.codegen.context import SceneContext
 
 
-def _row(unit: SceneContext, full: SceneContext) -> str:
+def _row(unit: SceneContext, full: Mapping[str, Any]) -> str:
     outs = ", ".join(o.name for o in unit.outputs) or "-"
     return (
-        f"{unit.prefix:<18} {unit.nx:>2}/{full.nx:<3} {unit.np:>3} {unit.nc:>3} "
+        f"{unit.prefix:<18} {unit.nx:>2}/{full['nx']:<3} {unit.np:>3} {unit.nc:>3} "
         f"{unit.ops['setup']:>6} {unit.ops['rhs']:>5}  {outs}"
     )
 
 
-def print_table(units: list[SceneContext]) -> None:
-    from gyrogen.codegen.generate import full_model_unit
-
-    full = full_model_unit()
+def print_table(units: list[SceneContext], full: Mapping[str, Any]) -> None:
+    """Each unit's sizes and op counts beside the full model's (full: its
+    manifest, or manifest.sizes of its unit)."""
+    nx, ops = full["nx"], full["ops"]
     click.echo(f"{'scene':<18} {'states':<6} {'np':>3} {'nc':>3} {'setup':>6} {'rhs':>5}  outputs")
     for unit in units:
         click.echo(_row(unit, full))
     click.echo(
-        f"{'(full model)':<18} {full.nx:>2}/{full.nx:<3} {full.np:>3} {full.nc:>3} "
-        f"{full.ops['setup']:>6} {full.ops['rhs']:>5}"
+        f"{'(full model)':<18} {nx:>2}/{nx:<3} {full['np']:>3} {full['nc']:>3} "
+        f"{ops['setup']:>6} {ops['rhs']:>5}"
     )
     click.echo("ops: sympy.count_ops summed over each function, temporaries and trig included")
 
@@ -63,10 +64,11 @@ def generate(
     checked before any is written."""
     from gyrogen.codegen import buildfiles
     from gyrogen.codegen.generate import render_all, unit_of
+    from gyrogen.codegen.manifest import sizes
     from gyrogen.errors import SceneError
     from gyrogen.files import can_write, claim, transaction, write_atomic
     from gyrogen.oracle.compare import check_rendered
-    from gyrogen.runtime.scene_build import keep_sources
+    from gyrogen.runtime.scene_build import full_model_manifest, keep_sources
 
     chosen = [load(n) for n in builtin_names()] if every else list(scenes) or [default()]
     names = [scene.name for scene in chosen]
@@ -84,10 +86,13 @@ def generate(
     for scene, target in pairs:  # every scene's, before any work
         claim(target, scene.name)
         can_write(target, [])
+    # the full model every manifest compares with: the default scene's unit when it is
+    # rendered here, else its manifest in the cache (which derives nothing when kept)
+    full = sizes(unit_of(default())) if default() in chosen else full_model_manifest()
     rendered = []
     for scene, target in progress("generating", pairs) if len(pairs) > 1 else pairs:
         unit = unit_of(scene)
-        files = render_all(unit, lib)
+        files = render_all(unit, lib, full)
         can_write(target, files)  # before the check's seconds, not after
         rendered.append((scene, target, unit, files))
     if not no_check:
@@ -105,7 +110,7 @@ def generate(
         keep_sources(scene, unit.build_id, {n: t for n, t in files.items() if n not in lib_files})
     for _, target, _, _ in rendered:
         click.echo(f"wrote {target}/")
-    print_table([unit for _, _, unit, _ in rendered])
+    print_table([unit for _, _, unit, _ in rendered], full)
 
 
 command = generate

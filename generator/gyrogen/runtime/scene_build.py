@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from functools import cache, cached_property
 from importlib.metadata import version
 from pathlib import Path
+from typing import Any
 
 import gyrogen
 from gyrogen.errors import GyrogenError
@@ -39,7 +40,7 @@ from gyrogen.files import claim, write_atomic
 from gyrogen.runtime.build import Halt, build
 from gyrogen.runtime.cache import cache_dir
 from gyrogen.runtime.compiled import Compiled, Language
-from gyrogen.scene import Scene
+from gyrogen.scene import Scene, default
 
 
 @dataclass(frozen=True)
@@ -176,12 +177,25 @@ def scene_sources(scene: Scene, portable: bool = False) -> Sources:
         return Sources(str(held["build_id"]), language, dict(held["files"]), portable)
     except (OSError, ValueError, KeyError, TypeError):
         pass
+    full = full_model_manifest() if scene != default() else None  # the default: the full model
     from gyrogen.codegen.context import build_id  # sympy: only when rendering
     from gyrogen.codegen.generate import render_all, unit_of
 
-    files = render_all(unit_of(scene))
+    files = render_all(unit_of(scene), full=full)
     keep_sources(scene, build_id(scene), files)
     return Sources(build_id(scene), language, files, portable)
+
+
+def full_model_manifest() -> dict[str, Any]:
+    """The full model's (the default scene's) manifest, among its kept
+    sources: what every other scene's manifest and `gyrogen generate`'s
+    table compare with (its nx, np, nc and ops), so that a process rendering
+    another scene derives no full model (3 s of CPU) when the cache holds
+    it. It is keyed as every scene's sources are, by the scene, the code
+    that renders it and sympy's version: all its sizes depend on. Not kept,
+    the default scene is rendered and kept (scene_sources)."""
+    held: dict[str, Any] = json.loads(scene_sources(default()).files["manifest.json"])
+    return held
 
 
 def build_dir(

@@ -48,6 +48,11 @@ class Event(BaseModel):
     terminal: StrictBool = False
     """Stop the integration at the event (its own return code)."""
 
+    @property
+    def sign(self) -> int:
+        """direction as the integrators take it: 1 up, -1 down, 0 any."""
+        return {"up": 1, "down": -1, "any": 0}[self.direction]
+
     @field_validator("name")
     @classmethod
     def _name(cls, v: str) -> str:
