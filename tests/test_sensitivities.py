@@ -549,7 +549,6 @@ def test_every_parameter_of_a_cluster(tmp_path, cache_dir):
 
 
 @pytest.mark.slow
-@WIDE
 def test_the_shooting_example_converges_quadratically():
     """examples/shooting.py: Newton on Phi reaches the start that nulls the
     nutation, each residual at most a constant times the square of the last."""
