@@ -225,7 +225,6 @@ def test_phi_against_finite_differences(default_var, method):
 
 
 @pytest.mark.slow
-@WIDE
 def test_c_fortran_and_lanes_agree_bit_for_bit(default_var):
     """C = Fortran = the SIMD lanes of a batch, every entry of Phi."""
     c_build, f_build = default_var["c"], default_var["fortran"]
