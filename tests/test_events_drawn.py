@@ -36,9 +36,10 @@ FUZZ_EVENTS draws from a fresh seed)."""
 
 def _expression(rng: np.random.Generator, depth: int) -> str:
     """A random expression of the grammar that stays finite: divisions by
-    (2 + x**2), square roots of (1 + x**2)."""
+    (2 + x**2), square roots of (1 + x**2); a number in parentheses (-1.3**2
+    is -(1.3**2), and sqrt(1 + -1.3**2) is NaN)."""
     if depth == 0 or rng.random() < 0.25:
-        return str(rng.choice(LEAVES)) if rng.random() < 0.85 else repr(round(rng.normal(), 3))
+        return str(rng.choice(LEAVES)) if rng.random() < 0.85 else f"({round(rng.normal(), 3)!r})"
     a, b = _expression(rng, depth - 1), _expression(rng, depth - 1)
     kind = rng.integers(9)
     return [
