@@ -358,10 +358,9 @@ class LanePrinter(LanesPrinter):
             return f"{self.prefix}_stats {d.name}"
         return super().declaration(d, param)
 
-    def block(self, body: tuple[S, ...], depth: int) -> list[str]:
-        return CPrinter.block(self, body, depth)
-
     def function(self, func: Func) -> str:
+        """ret name(struct lanes *L, params), as CPrinter prints it (single:
+        the body's statements as they are)."""
         return CPrinter.function(self, func)
 
 
