@@ -228,7 +228,7 @@ def test_each_integrator_is_written_once() -> None:
     for quaternion in (False, True):
         asked = [m.name for m in every]  # the lanes generated only when asked for too
         p = program(every, quaternion, True, blocks, jet, kinds=("angle",) * 7, asked=asked)
-        for f in (*p.shared, *p.methods, *p.lanes):
+        for f in (*p.shared, *p.methods, *p.lanes, *p.handover):
             names.add(f.name)
     names |= {f.name.removeprefix("p_") for f in trig.functions("p", list(trig.VARIANTS))}
     names |= {f.name for f in intrinsics.functions()}
@@ -246,8 +246,6 @@ def test_each_integrator_is_written_once() -> None:
 
 HAND_OFF = "hands a batch's trajectories to the printed integrators and back"
 TEMPLATE_FUNCTIONS = {
-    ("c/lanes.jinja", "lane_start"): HAND_OFF,
-    ("c/lanes.jinja", "lanes_finish"): HAND_OFF,
     ("c/lanes.jinja", "pair_lanes"): HAND_OFF,
     ("c/lanes.jinja", "pair_batch"): HAND_OFF,
     ("cffi/glue.c.jinja", "gyrogen_rhs_batch"): HAND_OFF,

@@ -5107,42 +5107,44 @@ static void taylor_grid_step_lanes(struct lanes *L, const double *c, double rtol
     }
 }
 
-/* A trajectory into lane l, with ode_start's checks: -1 when the lane took
-   it, else the code it ended with at once (x as given, stats set). Over an
-   output grid (L->out), its rows in out from base = traj ntimes, the first
+/* A trajectory, index, into lane l, with ode_start's checks: -1 when the lane
+   took it, else the code it ended with at once (x as given, st set). Over an
+   output grid (L->out), its rows in out from base = index ntimes, the first
    one written unless the start was refused. */
-static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t traj,
+static int lane_start(struct lanes *L, int l, int order, double rtol_min, size_t index,
                       double t0, double t1, double *xs, const double *c, double rtol,
-                      double atol, double h0, long max_steps, gyrostat_stats *stats)
+                      double atol, double h0, long max_steps, gyrostat_stats *st)
 {
-    double *x = xs + traj * GYROSTAT_NX;
-    double f0[GYROSTAT_NX], h = 0.0;
+    double f[GYROSTAT_NX];
+    double hs = 0.0;
+    int started;
     int i;
-    const int code = ode_start(order, rtol_min, t0, t1, x, c, rtol, atol, h0, max_steps, f0, &h,
-                               stats);
-    if (code > GYROSTAT_ODE_OK || (code == GYROSTAT_ODE_OK && !L->out)) {
-        return code;
+
+    started = ode_start(order, rtol_min, t0, t1, xs + index * GYROSTAT_NX, c, rtol, atol, h0,
+            max_steps, f, &hs, st);
+    if (started > GYROSTAT_ODE_OK || (started == GYROSTAT_ODE_OK && !L->out)) {
+        return started;
     }
     for (i = 0; i < GYROSTAT_NX; ++i) {
-        L->x[i][l] = x[i];
+        L->x[i][l] = xs[index * GYROSTAT_NX + (size_t)i];
     }
     if (L->out) {
-        L->base[l] = (long)traj * L->ntimes;
+        L->base[l] = (long)index * L->ntimes;
         for (i = 0; i < GYROSTAT_NX; ++i) {
             L->out[L->base[l]][i] = L->x[i][l];
         }
         L->g[l] = 1;
     }
-    if (code >= 0) {
-        return code;
+    if (started >= 0) {
+        return started;
     }
     for (i = 0; i < GYROSTAT_NX; ++i) {
-        L->k[0][i][l] = f0[i];
+        L->k[0][i][l] = f[i];
     }
     for (i = 0; i < GYROSTAT_NX; ++i) {
-        L->f0[i][l] = f0[i];
+        L->f0[i][l] = f[i];
     }
-    L->h[l] = h;
+    L->h[l] = hs;
     L->code[l] = -1;
     L->t[l] = t0;
     L->nonfinite[l] = 0;
@@ -5157,26 +5159,26 @@ static int lane_start(int order, double rtol_min, struct lanes *L, int l, size_t
     L->new_point[l] = 1;
     L->cap[l] = h0 > 0.0 ? L->h[l] : DBL_MAX;
     L->stats_t[l] = t0;
-    L->stats_h[l] = stats->h;
+    L->stats_h[l] = st->h;
     L->stats_accepted[l] = 0;
     L->stats_rejected[l] = 0;
-    L->stats_rhs_calls[l] = stats->rhs_calls;
-    L->stats_jac_calls[l] = stats->jac_calls;
-    L->stats_decompositions[l] = stats->decompositions;
+    L->stats_rhs_calls[l] = st->rhs_calls;
+    L->stats_jac_calls[l] = st->jac_calls;
+    L->stats_decompositions[l] = st->decompositions;
     L->busy[l] = 1;
-    L->traj[l] = traj;
+    L->traj[l] = index;
     return -1;
 }
 
-/* Trajectory traj's results: its statistics and code (x is in place). */
-static void put_result(size_t traj, int code, const gyrostat_stats *st, gyrostat_stats *stats,
+/* Trajectory index's results: its statistics and code (x is in place). */
+static void put_result(size_t index, int code, const gyrostat_stats *st, gyrostat_stats *stats,
                        int *codes)
 {
     if (stats) {
-        stats[traj] = *st;
+        stats[index] = st[0];
     }
     if (codes) {
-        codes[traj] = code;
+        codes[index] = code;
     }
 }
 
@@ -5185,10 +5187,12 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, gyrostat_stat
                            int *codes)
 {
     size_t failed = 0;
-    int i, l;
+    gyrostat_stats st;
+    int i;
+    int l;
+
     for (l = 0; l < GYROSTAT_LANES; ++l) {
         if (L->busy[l] && L->code[l] >= 0) {
-            gyrostat_stats st;
             stats_start(&st, t0);
             st.t = L->stats_t[l];
             st.h = L->stats_h[l];
@@ -5201,7 +5205,7 @@ static size_t lanes_finish(struct lanes *L, double t0, double *xs, gyrostat_stat
                 xs[L->traj[l] * GYROSTAT_NX + (size_t)i] = L->x[i][l];
             }
             put_result(L->traj[l], L->code[l], &st, stats, codes);
-            failed += (size_t)(L->code[l] != GYROSTAT_ODE_OK);
+            failed = failed + (size_t)(L->code[l] != GYROSTAT_ODE_OK);
             L->busy[l] = 0;
         }
     }
@@ -5230,7 +5234,7 @@ static size_t pair_lanes(lanes_step step, int order, double rtol_min, size_t beg
         for (l = 0; l < GYROSTAT_LANES; ++l) {
             while (!L.busy[l] && next < end) {
                 gyrostat_stats st;
-                const int code = lane_start(order, rtol_min, &L, l, next, t0, t1, xs, c, rtol,
+                const int code = lane_start(&L, l, order, rtol_min, next, t0, t1, xs, c, rtol,
                                             atol, h0, max_steps, &st);
                 if (code >= 0) {
                     put_result(next, code, &st, stats, codes);

@@ -115,6 +115,17 @@ def count(field: str, by: E | int) -> S:
     return inc(stat(field), by)
 
 
+def lane_stats_start(kept: Sequence[str], given: str) -> list[S]:
+    """A lane's statistics as it takes a trajectory (kept: the fields struct
+    lanes holds per lane; given: the statistics ode_start set): the start
+    time, ode_start's h and calls, no step counted yet."""
+    first: list[S] = [assign(stat("t"), Var("t0")), assign(stat("h"), Var(f"{given}.h")),
+                      assign(stat("accepted"), 0), assign(stat("rejected"), 0),
+                      assign(stat("rhs_calls"), Var(f"{given}.rhs_calls"))]  # fmt: skip
+    done = ("t", "h", "accepted", "rejected", "rhs_calls")
+    return first + [assign(stat(n), Var(f"{given}.{n}")) for n in kept if n not in done]
+
+
 def started(m: Method, f0: E, into: Var, grid: bool | Grid = False) -> list[S]:
     """ode_start (common.ode_start): into := its code, returned when it stops.
     grid: first the grid's checks and ends (t0, t1), and then out[0] := x

@@ -16,6 +16,7 @@ from gyrogen.codegen.integrators import (
     driver,
     elementary,
     explicit,
+    handover,
     intrinsics,
     linear,
     pair,
@@ -29,7 +30,7 @@ from gyrogen.codegen.integrators import (
 from gyrogen.codegen.integrators.tables import Table, lookup
 from gyrogen.codegen.ir.c import CPrinter
 from gyrogen.codegen.ir.fortran import FortranPrinter
-from gyrogen.codegen.ir.lanes import LanesPrinter
+from gyrogen.codegen.ir.lanes import LanePrinter, LanesPrinter
 from gyrogen.codegen.ir.nodes import At, Decl, Func, Int, S, called, substituted, walk
 from gyrogen.methods import Kind, Method
 from gyrogen.symbolic.blocks import Blocks
@@ -183,6 +184,8 @@ class Program:
     """What struct lanes holds per lane (its arrays [..][LANES])."""
     init: list[S]
     """A trajectory's values at t0 in its lane (lane_start)."""
+    handover: list[Func] = field(default_factory=list)
+    """A trajectory into a lane and its results back (integrators.handover)."""
 
 
 def program(
@@ -245,7 +248,9 @@ def program(
     size = common.NX if measured is None else Int(measured)
     single, lanes, shared = ([with_caps(substituted(f, common.NE, size), kinds) for f in fs]
                              for fs in (single, lanes, shared))  # fmt: skip
-    return Program(shared, single, lanes, lanes_shared, state, init)
+    events_held = int(state["ev_old"].shape[0]) if "ev_old" in state else 0
+    handed = handover.functions(state, init, bool(pairs), events_held) if lanes else []
+    return Program(shared, single, lanes, lanes_shared, state, init, handed)
 
 
 def lane_candidates(blocks: Blocks | None) -> list[Func]:
@@ -316,6 +321,7 @@ def c_text(
     the integrators, the Jacobian and the pairs' rhs over lanes)."""
     c = CPrinter(prefix, macro, {})
     lanes = LanesPrinter(prefix, macro, {}, p.state)
+    lane = LanePrinter(prefix, macro, {}, p.state | handover.STRUCT)
     fields = []
     # the 8-byte arrays first, each LANES doubles long, so that in a struct
     # aligned to 64 bytes every one starts on a cache line (ints, then what
@@ -336,12 +342,10 @@ def c_text(
         "lanes": by_method(p.lanes, lanes.function),
         "lanes_shared": "\n".join(lanes.function(f) for f in p.lanes_shared),
         "lane_names": [f.name for f in p.lanes],
-        "lane_stats": [
-            d.name.removeprefix("stats.") for d in p.state.values() if d.name.startswith("stats.")
-        ],
         "fields": fields,
-        "lane_init": "\n".join(lanes.one_lane(tuple(p.init), 1)),
-        "grid_init": "\n".join(lanes.one_lane(tuple(driver.grid_first(driver.BASE)), 2)),
+        "handover": "\n".join(
+            (c if f.name == "put_result" else lane).function(f) for f in p.handover
+        ),
         "lane_events": int(p.state["ev_old"].shape[0]) if "ev_old" in p.state else 0,
     }
 

@@ -29,6 +29,7 @@ from gyrogen.codegen.ir.printer import ATOM, Printer, doc_lines
 
 CONSTS = {"EPSILON": "DBL_EPSILON", "TINY": "DBL_MIN", "HUGE": "DBL_MAX", "NAN": "(double)NAN"}
 CTYPE = {"double": "double", "int": "int", "long": "long", "bool": "int", "word": "uint64_t"}
+CTYPE |= {"size": "size_t"}
 FUNCTIONS = {
     "max": "dmax",
     "min": "dmin",
@@ -92,6 +93,8 @@ class CPrinter(Printer):
             return f"{self.prefix}_{name}({args[0]})"
         if name == "real":
             return f"(double){self.expr(nodes[0], ATOM)}"
+        if name in ("long", "size"):
+            return f"({CTYPE[name]}){self.expr(nodes[0], ATOM)}"
         return f"{self.spellings.get(name, name)}({', '.join(args)})"
 
     def select(self, e: Sel) -> str:
@@ -127,7 +130,7 @@ class CPrinter(Printer):
 
     def declaration(self, d: Decl, param: bool) -> str:
         if d.type == "stats":
-            return f"{self.prefix}_stats *{d.name}"
+            return f"{'const ' if d.intent == 'in' else ''}{self.prefix}_stats *{d.name}"
         ctype = CTYPE[d.type]
         if d.values:
             table = self.table(d.values)
@@ -152,11 +155,14 @@ class CPrinter(Printer):
     def extent(self, n: str | int) -> str:
         return self.const(n) if isinstance(n, str) else str(n)
 
+    lead: ClassVar[tuple[str, ...]] = ()
+    """Parameters every function of the printer takes first."""
+
     def function(self, func: Func) -> str:
         p = self.with_decls(func)
         p.restrict = func.restrict
         ret = "void" if func.returns is None else CTYPE[func.returns]
-        params = ", ".join(p.declaration(d, True) for d in func.params)
+        params = ", ".join([*self.lead, *(p.declaration(d, True) for d in func.params)])
         static = "static inline " if func.inline else "" if func.public else "static "
         head = p.wrap(
             f"{static}{ret} {func.name}({params})",

@@ -331,6 +331,39 @@ class LanesPrinter(CPrinter):
         return "\n".join(lines) + "\n"
 
 
+class LanePrinter(LanesPrinter):
+    """Functions of one lane l of a struct lanes L (a trajectory handed to a
+    lane and back): the struct's per-trajectory values are L->v[l] (l a
+    parameter or a loop's), every other name is as in one trajectory's C; a
+    local of type stats is a struct of the statistics itself (st.h)."""
+
+    single = True
+    lead = ("struct lanes *L",)
+    structs: frozenset[str] = frozenset()
+
+    def with_decls(self, func: Func) -> LanePrinter:
+        p = LanePrinter(self.prefix, self.macro, {d.name: d for d in func.params}, self.state)
+        p.structs = frozenset(d.name for d in func.locals if d.type == "stats")
+        return p
+
+    def var(self, name: str) -> tuple[str, int]:
+        if name in self.state:
+            return super().var(name)
+        if name.split(".")[0] in self.structs:
+            return name, ATOM
+        return CPrinter.var(self, name)
+
+    def declaration(self, d: Decl, param: bool) -> str:
+        if d.type == "stats" and not param:
+            return f"{self.prefix}_stats {d.name}"
+        return super().declaration(d, param)
+
+    def function(self, func: Func) -> str:
+        """ret name(struct lanes *L, params), as CPrinter prints it (single:
+        the body's statements as they are)."""
+        return CPrinter.function(self, func)
+
+
 def lane_init(d: Decl) -> str:
     """A per-lane local's start on every lane: only 0 (an initializer that
     fills the lanes whatever their number)."""
@@ -431,4 +464,4 @@ def converted(
     return out
 
 
-__all__ = ["At", "LanesPrinter", "Row", "Var"]
+__all__ = ["At", "LanePrinter", "LanesPrinter", "Row", "Var"]

@@ -118,9 +118,10 @@ class Word(E):
     value: int
 
 
-Type = Literal["double", "int", "long", "bool", "stats", "word"]
+Type = Literal["double", "int", "long", "bool", "stats", "word", "size"]
 """word: 64 unsigned bits (C uint64_t), a double's bits to shift and mask; C
-only (Fortran has intrinsics for what C computes from the bits)."""
+only (Fortran has intrinsics for what C computes from the bits). size: C's
+size_t, a trajectory's index in a batch (C only)."""
 Intent = Literal["in", "out", "inout", "tmp"]
 BinOp = Literal[
     "+", "-", "*", "/", "<", "<=", ">", ">=", "==", "!=", "and", "or", ">>", "<<", "&", "|"
@@ -144,7 +145,8 @@ class Un(E):
 @dataclass(frozen=True)
 class Fn(E):
     """A function: max, min, abs, sqrt, pow, floor, finite (not NaN or Inf),
-    cos (the scene's), or a function of the file by its name."""
+    cos (the scene's), or a function of the file by its name; C only: long
+    and size, an integer converted to a long or a size_t."""
 
     name: str
     args: tuple[E, ...]
