@@ -456,17 +456,6 @@ def test_a_step_that_loses_the_attitude_is_not_taken(
     np.testing.assert_array_equal(x, x0)
 
 
-def test_steps_is_asked_for_by_the_kind_of_method(angles: dict[str, Compiled]) -> None:
-    """rk4 without steps= says it needs them; an adaptive method with them
-    says they are not its (one line each, before any call)."""
-    b = angles["c"]
-    x0, c = np.array([0.0, 0.0, 0.0, 0.1, 0.0, 0.2, 0.0]), b.setup(np.zeros(0))
-    with pytest.raises(ValueError, match=r"^rk4 is a fixed-step method: give it steps="):
-        b.integrate("rk4", x0, c, 0.0, 1.0)
-    with pytest.raises(ValueError, match=r"^dop853 is adaptive: steps= goes with"):
-        b.integrate("dop853", x0, c, 0.0, 1.0, steps=10)
-
-
 # --- the interface states the numbers -------------------------------------------------
 
 
